@@ -1,0 +1,93 @@
+"""Exceptions raised by taplan.
+
+Every failure is a :class:`TaplanError`. Subclasses say which part failed and carry the offending values, so a
+caller can catch narrowly and a log line can say what to change.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = [
+    "TaplanError",
+    "InvalidInputError",
+    "InvalidLimitsError",
+    "UnknownNameError",
+    "ConfigError",
+    "InfeasibleError",
+    "SolverError",
+    "TimingError",
+    "StreamError",
+]
+
+
+class TaplanError(Exception):
+    """Base class of every error taplan raises."""
+
+
+class InvalidInputError(TaplanError, ValueError):
+    """An argument has the wrong shape, type or value.
+
+    Attributes:
+        argument: Name of the offending argument.
+        received: What was received (possibly abbreviated).
+    """
+
+    def __init__(self, argument: str, received: Any, expected: str) -> None:
+        self.argument = argument
+        self.received = received
+        self.expected = expected
+        super().__init__(f"{argument}: expected {expected}, received {_abbreviate(received)}")
+
+
+class InvalidLimitsError(InvalidInputError):
+    """A joint limit is malformed; the message names the field and the joint."""
+
+    def __init__(self, field: str, joint: str | None, received: Any, expected: str) -> None:
+        self.field = field
+        self.joint = joint
+        where = f"{field}[{joint}]" if joint is not None else field
+        super().__init__(where, received, expected)
+
+
+class UnknownNameError(TaplanError, KeyError):
+    """A joint, frame, group or option name is not known; the message lists the valid names."""
+
+    def __init__(self, kind: str, name: Any, valid: list[str] | tuple[str, ...]) -> None:
+        self.kind = kind
+        self.name = name
+        self.valid = tuple(valid)
+        shown = ", ".join(map(str, self.valid[:40])) + (", ..." if len(self.valid) > 40 else "")
+        super().__init__(f"unknown {kind} {name!r}; valid: {shown}")
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return str(self.args[0])
+
+
+class ConfigError(TaplanError):
+    """A configuration file is missing, unreadable or does not follow its schema."""
+
+
+class InfeasibleError(TaplanError):
+    """A problem has no solution that satisfies its hard constraints (e.g. an unreachable pose)."""
+
+
+class SolverError(TaplanError):
+    """A numerical solver failed. ``problem`` holds what was sent to it, for inspection."""
+
+    def __init__(self, message: str, problem: Any = None) -> None:
+        self.problem = problem
+        super().__init__(message)
+
+
+class TimingError(TaplanError):
+    """Time parameterisation failed (TOPP-RA, ruckig or the trajectory optimiser)."""
+
+
+class StreamError(TaplanError):
+    """A streaming target was rejected; the stream keeps its last good motion."""
+
+
+def _abbreviate(value: Any, limit: int = 120) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

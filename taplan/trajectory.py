@@ -1,0 +1,354 @@
+"""Time-parameterised joint trajectories.
+
+A :class:`Trajectory` holds samples ``times`` (N,), ``positions`` (N, n) and optionally ``velocities`` and
+``accelerations`` (N, n) for named joints. Between samples it is the piecewise polynomial the samples define:
+
+* positions only: linear (velocity steps at the samples, as a linear interpolator sends them);
+* positions and velocities: cubic Hermite (continuous velocity);
+* positions, velocities and accelerations: quintic Hermite (continuous acceleration).
+
+Outside ``[times[0], times[-1]]`` evaluation returns the boundary sample (held), as a controller holds its last
+point. Files: CSV (``time`` then ``<joint>.pos``/``.vel``/``.acc`` columns), JSON, and NPZ (loaded without pickle).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from taplan._validation import as_positive
+from taplan.errors import ConfigError, InvalidInputError
+
+__all__ = ["Trajectory", "Waypoint"]
+
+_TIME_TOL = 1e-12  # [s]
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """A trajectory point as a controller receives it (``trajectory_msgs/JointTrajectoryPoint``).
+
+    Attributes:
+        time_from_start: [s].
+        positions: [rad], shape (n,).
+        velocities: [rad]/[s], shape (n,), or None when the point carries none.
+        accelerations: [rad]/[s]², shape (n,), or None.
+    """
+
+    time_from_start: float
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    accelerations: np.ndarray | None = None
+
+
+class Trajectory:
+    """Joint trajectory over time.
+
+    Args:
+        times: Sample times [s], strictly increasing, shape (N,), N >= 2.
+        positions: [rad], shape (N, n).
+        velocities: [rad]/[s], shape (N, n), or None.
+        accelerations: [rad]/[s]², shape (N, n), or None (needs velocities).
+        joint_names: n names; default ``joint0..``.
+    """
+
+    def __init__(
+        self,
+        times: npt.ArrayLike,
+        positions: npt.ArrayLike,
+        velocities: npt.ArrayLike | None = None,
+        accelerations: npt.ArrayLike | None = None,
+        joint_names: Sequence[str] | None = None,
+    ) -> None:
+        t = _finite(times, "times", ndim=1)
+        if t.shape[0] < 2:
+            raise InvalidInputError("times", t, "at least 2 samples")
+        steps = np.diff(t)
+        if np.any(steps <= _TIME_TOL):
+            k = int(np.argmax(steps <= _TIME_TOL))
+            raise InvalidInputError(
+                "times", f"times[{k}]={t[k]!r}, times[{k + 1}]={t[k + 1]!r}", "strictly increasing sample times"
+            )
+        q = _finite(positions, "positions", ndim=2)
+        if q.shape[0] != t.shape[0]:
+            raise InvalidInputError("positions", f"shape {q.shape}", f"({t.shape[0]}, n): one row per time")
+        n = q.shape[1]
+        v = None if velocities is None else _finite(velocities, "velocities", ndim=2)
+        a = None if accelerations is None else _finite(accelerations, "accelerations", ndim=2)
+        for name, arr in (("velocities", v), ("accelerations", a)):
+            if arr is not None and arr.shape != q.shape:
+                raise InvalidInputError(name, f"shape {arr.shape}", f"shape {q.shape}, like positions")
+        if a is not None and v is None:
+            raise InvalidInputError("accelerations", "given without velocities", "velocities as well")
+        names = tuple(joint_names) if joint_names is not None else tuple(f"joint{i}" for i in range(n))
+        if len(names) != n or len(set(names)) != n:
+            raise InvalidInputError("joint_names", names, f"{n} unique names")
+        for arr in (t, q, v, a):
+            if arr is not None:
+                arr.setflags(write=False)
+        self.times, self.positions, self.velocities, self.accelerations = t, q, v, a
+        self.joint_names: tuple[str, ...] = tuple(str(x) for x in names)
+        self._coefficients = _segment_coefficients(t, q, v, a)  # (N-1, 6, n), powers of (t - t_k)
+
+    # ------------------------------------------------------------------------------------------------ properties
+    @property
+    def duration(self) -> float:
+        """``times[-1] - times[0]`` [s]."""
+        return float(self.times[-1] - self.times[0])
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.positions.shape[1])
+
+    @property
+    def interpolation(self) -> str:
+        """``"linear"``, ``"cubic"`` or ``"quintic"``, from the fields present."""
+        if self.velocities is None:
+            return "linear"
+        return "cubic" if self.accelerations is None else "quintic"
+
+    def __len__(self) -> int:
+        return int(self.times.shape[0])
+
+    def __repr__(self) -> str:
+        return (
+            f"Trajectory(samples={len(self)}, joints={self.n_joints}, duration={self.duration:.4f} s, "
+            f"{self.interpolation})"
+        )
+
+    # ------------------------------------------------------------------------------------------------ evaluation
+    def __call__(self, t: npt.ArrayLike, order: int = 0) -> np.ndarray:
+        """Evaluate at time(s) ``t`` [s]: position (order 0), velocity (1), acceleration (2) or jerk (3).
+
+        Returns shape (n,) for a scalar ``t``, (len(t), n) for an array.
+        """
+        if order not in (0, 1, 2, 3):
+            raise InvalidInputError("order", order, "0, 1, 2 or 3")
+        t_arr = np.asarray(t, dtype=float)
+        if not np.all(np.isfinite(t_arr)):
+            raise InvalidInputError("t", t, "finite times")
+        flat = np.atleast_1d(t_arr).ravel()
+        tc = np.clip(flat, self.times[0], self.times[-1])
+        k = np.clip(np.searchsorted(self.times, tc, side="right") - 1, 0, len(self.times) - 2)
+        tau = (tc - self.times[k])[:, None]
+        c = self._coefficients[k]  # (m, 6, n)
+        if order == 0:
+            out = c[:, 0] + tau * (c[:, 1] + tau * (c[:, 2] + tau * (c[:, 3] + tau * (c[:, 4] + tau * c[:, 5]))))
+        elif order == 1:
+            out = c[:, 1] + tau * (2 * c[:, 2] + tau * (3 * c[:, 3] + tau * (4 * c[:, 4] + tau * 5 * c[:, 5])))
+        elif order == 2:
+            out = 2 * c[:, 2] + tau * (6 * c[:, 3] + tau * (12 * c[:, 4] + tau * 20 * c[:, 5]))
+        else:
+            out = 6 * c[:, 3] + tau * (24 * c[:, 4] + tau * 60 * c[:, 5])
+        outside = (flat < self.times[0]) | (flat > self.times[-1])
+        if order > 0 and np.any(outside):  # held ends: report the boundary samples' own derivatives
+            ends = self._boundary(order)
+            out[flat < self.times[0]] = ends[0]
+            out[flat > self.times[-1]] = ends[1]
+        return out[0] if t_arr.ndim == 0 else out.reshape(*t_arr.shape, self.n_joints)
+
+    def _boundary(self, order: int) -> tuple[np.ndarray, np.ndarray]:
+        zero = np.zeros(self.n_joints)
+        field = {1: self.velocities, 2: self.accelerations}.get(order)
+        if field is None:
+            return zero, zero
+        return field[0], field[-1]
+
+    def sample(self, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Uniform samples at ``rate`` [Hz] from ``times[0]``, the end time included.
+
+        Returns:
+            (times (m,), positions, velocities, accelerations (m, n)).
+        """
+        t = self.sample_times(rate)
+        return t, self(t, 0), self(t, 1), self(t, 2)
+
+    def sample_times(self, rate: float) -> np.ndarray:
+        """Times ``times[0] + k / rate`` up to the end, plus the end time when it is not on the grid [s]."""
+        rate = as_positive(rate, "rate")
+        count = int(np.floor(self.duration * rate + 1e-9))
+        t = self.times[0] + np.arange(count + 1) / rate
+        if self.times[-1] - t[-1] > 1e-9:
+            t = np.append(t, self.times[-1])
+        return t
+
+    def resample(self, rate: float) -> Trajectory:
+        """A quintic trajectory sampled at ``rate`` [Hz] (positions, velocities and accelerations)."""
+        t, q, v, a = self.sample(rate)
+        return Trajectory(t, q, v, a, self.joint_names)
+
+    def waypoints(self, *, velocities: bool = True, accelerations: bool = False) -> list[Waypoint]:
+        """The samples as controller waypoints, ``time_from_start`` measured from ``times[0]``.
+
+        Args:
+            velocities: Include velocities (evaluated from the interpolant when not stored).
+            accelerations: Include accelerations (likewise).
+        """
+        v = self(self.times, 1) if velocities else None
+        a = self(self.times, 2) if accelerations else None
+        return [
+            Waypoint(
+                float(t - self.times[0]),
+                self.positions[i].copy(),
+                None if v is None else v[i].copy(),
+                None if a is None else a[i].copy(),
+            )
+            for i, t in enumerate(self.times)
+        ]
+
+    @classmethod
+    def from_waypoints(cls, waypoints: Sequence[Waypoint], joint_names: Sequence[str] | None = None) -> Trajectory:
+        """Build from waypoints; velocities/accelerations are kept only when every waypoint has them."""
+        if len(waypoints) < 2:
+            raise InvalidInputError("waypoints", len(waypoints), "at least 2 waypoints")
+        t = [w.time_from_start for w in waypoints]
+        q = [w.positions for w in waypoints]
+        v = [w.velocities for w in waypoints]
+        a = [w.accelerations for w in waypoints]
+        vel = None if any(x is None for x in v) else v
+        acc = None if vel is None or any(x is None for x in a) else a
+        return cls(t, q, vel, acc, joint_names)
+
+    def select(self, joint_names: Sequence[str]) -> Trajectory:
+        """The same trajectory restricted to (and ordered by) ``joint_names``."""
+        lookup = {n: i for i, n in enumerate(self.joint_names)}
+        missing = [n for n in joint_names if n not in lookup]
+        if missing:
+            from taplan.errors import UnknownNameError
+
+            raise UnknownNameError("joint", missing[0], self.joint_names)
+        idx = [lookup[n] for n in joint_names]
+        pick = lambda arr: None if arr is None else arr[:, idx]  # noqa: E731
+        return Trajectory(
+            self.times, self.positions[:, idx], pick(self.velocities), pick(self.accelerations), joint_names
+        )
+
+    def shifted(self, offset: float) -> Trajectory:
+        """The same trajectory with ``offset`` [s] added to every time."""
+        return Trajectory(self.times + offset, self.positions, self.velocities, self.accelerations, self.joint_names)
+
+    # ------------------------------------------------------------------------------------------------------- I/O
+    def to_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "joint_names": list(self.joint_names),
+            "times": self.times.tolist(),
+            "positions": self.positions.tolist(),
+        }
+        if self.velocities is not None:
+            out["velocities"] = self.velocities.tolist()
+        if self.accelerations is not None:
+            out["accelerations"] = self.accelerations.tolist()
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, object]) -> Trajectory:
+        try:
+            return cls(
+                data["times"],  # type: ignore[arg-type]
+                data["positions"],  # type: ignore[arg-type]
+                data.get("velocities"),  # type: ignore[arg-type]
+                data.get("accelerations"),  # type: ignore[arg-type]
+                data.get("joint_names"),  # type: ignore[arg-type]
+            )
+        except KeyError as exc:
+            raise ConfigError(f"trajectory data lacks {exc}; needs 'times' and 'positions'") from exc
+
+    def save(self, path: str | Path) -> Path:
+        """Write to ``.csv``, ``.json`` or ``.npz`` (by suffix). Returns the path."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix == ".json":
+            path.write_text(json.dumps(self.to_dict()))
+        elif suffix == ".npz":
+            arrays = {k: np.asarray(v) for k, v in self.to_dict().items()}
+            np.savez(path, **arrays)
+        elif suffix == ".csv":
+            columns = ["time"] + [f"{n}.pos" for n in self.joint_names]
+            blocks = [self.times[:, None], self.positions]
+            for tag, arr in (("vel", self.velocities), ("acc", self.accelerations)):
+                if arr is not None:
+                    columns += [f"{n}.{tag}" for n in self.joint_names]
+                    blocks.append(arr)
+            np.savetxt(path, np.hstack(blocks), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
+        else:
+            raise InvalidInputError("path", str(path), "a file ending in .csv, .json or .npz")
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Trajectory:
+        """Read a file written by :meth:`save` (or any file of the same layout)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"trajectory file not found: {str(path)!r}")
+        suffix = path.suffix.lower()
+        try:
+            if suffix == ".json":
+                return cls.from_dict(json.loads(path.read_text()))
+            if suffix == ".npz":
+                with np.load(path, allow_pickle=False) as npz:
+                    return cls.from_dict({k: npz[k] for k in npz.files})
+            if suffix == ".csv":
+                return _load_csv(path)
+        except (ValueError, json.JSONDecodeError) as exc:
+            if isinstance(exc, InvalidInputError):
+                raise
+            raise ConfigError(f"cannot parse {str(path)!r}: {exc}") from exc
+        raise InvalidInputError("path", str(path), "a file ending in .csv, .json or .npz")
+
+
+def _load_csv(path: Path) -> Trajectory:
+    with path.open() as handle:
+        header = handle.readline().strip().split(",")
+    table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if not header or header[0] != "time" or table.shape[1] != len(header):
+        raise ConfigError(f"{str(path)!r}: expected a 'time' column then '<joint>.pos' columns")
+    names = [h[:-4] for h in header if h.endswith(".pos")]
+    fields: dict[str, np.ndarray] = {}
+    for tag in ("pos", "vel", "acc"):
+        cols = [header.index(f"{n}.{tag}") for n in names if f"{n}.{tag}" in header]
+        if cols and len(cols) != len(names):
+            raise ConfigError(f"{str(path)!r}: '.{tag}' columns must cover every joint or none")
+        if cols:
+            fields[tag] = table[:, cols]
+    if "pos" not in fields:
+        raise ConfigError(f"{str(path)!r}: no '<joint>.pos' columns")
+    return Trajectory(table[:, 0], fields["pos"], fields.get("vel"), fields.get("acc"), names)
+
+
+def _finite(value: npt.ArrayLike, name: str, ndim: int) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidInputError(name, value, "a numeric array") from None
+    if array.ndim != ndim:
+        raise InvalidInputError(name, f"array of shape {array.shape}", f"a {ndim}-D array")
+    if not np.all(np.isfinite(array)):
+        raise InvalidInputError(name, "values with NaN or inf", "finite values")
+    return array
+
+
+def _segment_coefficients(t: np.ndarray, q: np.ndarray, v: np.ndarray | None, a: np.ndarray | None) -> np.ndarray:
+    h = np.diff(t)[:, None]
+    dq = np.diff(q, axis=0)
+    c = np.zeros((len(t) - 1, 6, q.shape[1]))
+    c[:, 0] = q[:-1]
+    if v is None:
+        c[:, 1] = dq / h
+        return c
+    v0, v1 = v[:-1], v[1:]
+    c[:, 1] = v0
+    if a is None:
+        c[:, 2] = (3 * dq - (2 * v0 + v1) * h) / h**2
+        c[:, 3] = (-2 * dq + (v0 + v1) * h) / h**3
+        return c
+    a0, a1 = a[:-1], a[1:]
+    c[:, 2] = a0 / 2
+    c[:, 3] = (20 * dq - (8 * v1 + 12 * v0) * h - (3 * a0 - a1) * h**2) / (2 * h**3)
+    c[:, 4] = (-30 * dq + (14 * v1 + 16 * v0) * h + (3 * a0 - 2 * a1) * h**2) / (2 * h**4)
+    c[:, 5] = (12 * dq - 6 * (v1 + v0) * h + (a1 - a0) * h**2) / (2 * h**5)
+    return c
