@@ -28,7 +28,7 @@ def as_matrix(value: npt.ArrayLike, name: str, shape: tuple[int | None, int | No
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise InvalidInputError(name, value, "a numeric array") from None
-    if array.ndim != 2 or any(s is not None and s != a for s, a in zip(shape, array.shape)):
+    if array.ndim != 2 or any(s is not None and s != a for s, a in zip(shape, array.shape, strict=True)):
         shown = tuple("n" if s is None else s for s in shape)
         raise InvalidInputError(name, f"array of shape {array.shape}", f"shape {shown}")
     if not np.all(np.isfinite(array)):

@@ -1,0 +1,1 @@
+"""taplan's benchmark suite: ``python -m benchmarks`` (or ``taplan bench``) runs every bench_*.py."""
