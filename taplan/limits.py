@@ -201,6 +201,7 @@ class JointLimits:
             for i in np.flatnonzero(cfg != model):
                 differences.append(LimitDifference(names[i], bound, float(cfg[i]), float(model[i]), float(used[i])))
             cfg[:] = used
+        differences.sort(key=lambda d: (names.index(d.joint), d.bound))
         for d in differences:
             logger.info(
                 "%s %s bound: arm_config %.3f, model %.3f, using %.3f", d.joint, d.bound, d.config, d.model, d.used

@@ -145,7 +145,7 @@ class Robot:
             arm_config, model_lower=model.lowerPositionLimit, model_upper=model.upperPositionLimit
         )
         right = _adjust_pose(system_config)
-        home = np.concatenate([-right, right])
+        home = np.concatenate([0.0 - right, right])  # 0.0 - x: no negative zeros
         groups = {
             "left": ([f"l_joint{i}" for i in range(1, 8)], "left_ee", "left_shoulder_base"),
             "right": ([f"r_joint{i}" for i in range(1, 8)], "right_ee", "right_shoulder_base"),

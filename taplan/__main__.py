@@ -1,0 +1,5 @@
+import sys
+
+from taplan.cli import main
+
+sys.exit(main())
