@@ -23,9 +23,11 @@ from taplan.limits import DEFAULT_PLANNING_SCALING, JointLimits
 
 __all__ = ["Robot", "ArmGroup", "MODELS_DIR", "TELEAVATAR_URDF", "TELEAVATAR_ARM_CONFIG", "TELEAVATAR_SYSTEM_CONFIG"]
 
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
-if not MODELS_DIR.is_dir():  # installed as a wheel: models/ is shipped as the taplan.models package
-    MODELS_DIR = Path(__file__).resolve().parent / "models"
+# taplan/models is a link to the repository's models/ folder, so a source checkout and a built wheel find the
+# bundled files at the same place.
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+if not (MODELS_DIR / "teleavatar").is_dir():  # a checkout where the link was not kept (e.g. no symlink support)
+    MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 TELEAVATAR_URDF = MODELS_DIR / "teleavatar" / "teleavatar.urdf"
 TELEAVATAR_ARM_CONFIG = MODELS_DIR / "teleavatar" / "arm_config.yml"
 TELEAVATAR_SYSTEM_CONFIG = MODELS_DIR / "teleavatar" / "system_config.yaml"
