@@ -5,7 +5,10 @@ A :class:`Trajectory` holds samples ``times`` (N,), ``positions`` (N, n) and opt
 
 * positions only: linear (velocity steps at the samples, as a linear interpolator sends them);
 * positions and velocities: cubic Hermite (continuous velocity);
-* positions, velocities and accelerations: quintic Hermite (continuous acceleration).
+* positions, velocities and accelerations: quintic Hermite (continuous acceleration);
+* built with :meth:`Trajectory.from_polynomials`: any piecewise polynomial in time (e.g. the exact output of TOPP-RA,
+  whose acceleration steps at its gridpoints); ``positions``/``velocities``/``accelerations`` then hold the values
+  at the sample times (right-hand limits).
 
 Outside ``[times[0], times[-1]]`` evaluation returns the boundary sample (held), as a controller holds its last
 point. Files: CSV (``time`` then ``<joint>.pos``/``.vel``/``.acc`` columns), JSON, and NPZ (loaded without pickle).
@@ -24,7 +27,7 @@ import numpy.typing as npt
 from taplan._validation import as_positive
 from taplan.errors import ConfigError, InvalidInputError
 
-__all__ = ["Trajectory", "Waypoint"]
+__all__ = ["Trajectory", "Waypoint", "concatenate"]
 
 _TIME_TOL = 1e-12  # [s]
 
@@ -93,7 +96,58 @@ class Trajectory:
                 arr.setflags(write=False)
         self.times, self.positions, self.velocities, self.accelerations = t, q, v, a
         self.joint_names: tuple[str, ...] = tuple(str(x) for x in names)
-        self._coefficients = _segment_coefficients(t, q, v, a)  # (N-1, 6, n), powers of (t - t_k)
+        self._coefficients = _segment_coefficients(t, q, v, a)  # (N-1, d+1, n), powers of (t - t_k)
+        self._polynomial = False
+        self._derived: dict[int, np.ndarray] = {}
+
+    @classmethod
+    def from_polynomials(
+        cls,
+        times: npt.ArrayLike,
+        coefficients: npt.ArrayLike,
+        joint_names: Sequence[str] | None = None,
+        *,
+        continuity_tol: float = 1e-6,
+        continuous_velocity: bool = True,
+    ) -> Trajectory:
+        """A piecewise polynomial trajectory.
+
+        Args:
+            times: Breakpoints [s], strictly increasing, shape (N,).
+            coefficients: Shape (N-1, d+1, n): segment k is ``sum_i coefficients[k, i] * (t - times[k])**i``.
+            joint_names: n names; default ``joint0..``.
+            continuity_tol: Largest position [rad] and velocity [rad]/[s] jump allowed between segments.
+            continuous_velocity: Check velocity continuity too (False for linear interpolation).
+
+        Raises:
+            InvalidInputError: bad shapes, non-finite values, or a position/velocity jump above ``continuity_tol``.
+        """
+        t = _finite(times, "times", ndim=1)
+        c = _finite(coefficients, "coefficients", ndim=3)
+        if t.shape[0] < 2 or c.shape[0] != t.shape[0] - 1 or c.shape[1] < 1:
+            raise InvalidInputError("coefficients", f"shape {c.shape}", f"({t.shape[0] - 1}, d+1, n), one per segment")
+        if c.shape[1] < 4:
+            c = np.concatenate([c, np.zeros((c.shape[0], 4 - c.shape[1], c.shape[2]))], axis=1)
+        h = np.diff(t)
+        if np.any(h <= _TIME_TOL):
+            raise InvalidInputError("times", t, "strictly increasing sample times")
+        ends = [_polyval(c, h, order) for order in (0, 1, 2)]  # (N-1, n) values at each segment's end
+        checks = ((0, "position"), (1, "velocity")) if continuous_velocity else ((0, "position"),)
+        for order, name in checks:
+            jump = np.abs(ends[order][:-1] - _polyval(c[1:], np.zeros(len(h) - 1), order)) if len(h) > 1 else None
+            if jump is not None and jump.size and float(np.max(jump)) > continuity_tol:
+                k = int(np.argmax(np.max(jump, axis=1)))
+                raise InvalidInputError(
+                    "coefficients", f"{name} jump {float(np.max(jump[k])):.3g} at times[{k + 1}]", "continuous segments"
+                )
+        starts = [_polyval(c, np.zeros(len(h)), order) for order in (0, 1, 2)]
+        q, v, a = (np.vstack([starts[o], ends[o][-1:]]) for o in (0, 1, 2))
+        traj = cls(t, q, v, a, joint_names)
+        c.setflags(write=False)
+        traj._coefficients = c
+        traj._polynomial = True
+        traj._derived = {}
+        return traj
 
     # ------------------------------------------------------------------------------------------------ properties
     @property
@@ -107,7 +161,9 @@ class Trajectory:
 
     @property
     def interpolation(self) -> str:
-        """``"linear"``, ``"cubic"`` or ``"quintic"``, from the fields present."""
+        """``"linear"``, ``"cubic"``, ``"quintic"`` (from the fields present) or ``"polynomial"``."""
+        if self._polynomial:
+            return "polynomial"
         if self.velocities is None:
             return "linear"
         return "cubic" if self.accelerations is None else "quintic"
@@ -136,21 +192,29 @@ class Trajectory:
         tc = np.clip(flat, self.times[0], self.times[-1])
         k = np.clip(np.searchsorted(self.times, tc, side="right") - 1, 0, len(self.times) - 2)
         tau = (tc - self.times[k])[:, None]
-        c = self._coefficients[k]  # (m, 6, n)
-        if order == 0:
-            out = c[:, 0] + tau * (c[:, 1] + tau * (c[:, 2] + tau * (c[:, 3] + tau * (c[:, 4] + tau * c[:, 5]))))
-        elif order == 1:
-            out = c[:, 1] + tau * (2 * c[:, 2] + tau * (3 * c[:, 3] + tau * (4 * c[:, 4] + tau * 5 * c[:, 5])))
-        elif order == 2:
-            out = 2 * c[:, 2] + tau * (6 * c[:, 3] + tau * (12 * c[:, 4] + tau * 20 * c[:, 5]))
-        else:
-            out = 6 * c[:, 3] + tau * (24 * c[:, 4] + tau * 60 * c[:, 5])
+        c = self.derivative_coefficients(order)[k]  # (m, d+1-order, n)
+        out = c[:, -1] * np.ones_like(tau)
+        for i in range(c.shape[1] - 2, -1, -1):
+            out = c[:, i] + tau * out
         outside = (flat < self.times[0]) | (flat > self.times[-1])
         if order > 0 and np.any(outside):  # held ends: report the boundary samples' own derivatives
             ends = self._boundary(order)
             out[flat < self.times[0]] = ends[0]
             out[flat > self.times[-1]] = ends[1]
         return out[0] if t_arr.ndim == 0 else out.reshape(*t_arr.shape, self.n_joints)
+
+    @property
+    def coefficients(self) -> np.ndarray:
+        """Segment polynomials, shape (N-1, d+1, n): ``sum_i c[k, i] (t - times[k])**i`` on segment k."""
+        return self._coefficients
+
+    def derivative_coefficients(self, order: int) -> np.ndarray:
+        """Coefficients of the ``order``-th time derivative, shape (N-1, max(d+1-order, 1), n)."""
+        if order == 0:
+            return self._coefficients
+        if order not in self._derived:
+            self._derived[order] = _derivative(self._coefficients, order)
+        return self._derived[order]
 
     def _boundary(self, order: int) -> tuple[np.ndarray, np.ndarray]:
         zero = np.zeros(self.n_joints)
@@ -223,6 +287,10 @@ class Trajectory:
 
             raise UnknownNameError("joint", missing[0], self.joint_names)
         idx = [lookup[n] for n in joint_names]
+        if self._polynomial:
+            return Trajectory.from_polynomials(
+                self.times, self._coefficients[:, :, idx], joint_names, continuous_velocity=False
+            )
         pick = lambda arr: None if arr is None else arr[:, idx]  # noqa: E731
         return Trajectory(
             self.times, self.positions[:, idx], pick(self.velocities), pick(self.accelerations), joint_names
@@ -230,6 +298,10 @@ class Trajectory:
 
     def shifted(self, offset: float) -> Trajectory:
         """The same trajectory with ``offset`` [s] added to every time."""
+        if self._polynomial:
+            return Trajectory.from_polynomials(
+                self.times + offset, self._coefficients, self.joint_names, continuous_velocity=False
+            )
         return Trajectory(self.times + offset, self.positions, self.velocities, self.accelerations, self.joint_names)
 
     # ------------------------------------------------------------------------------------------------------- I/O
@@ -243,11 +315,21 @@ class Trajectory:
             out["velocities"] = self.velocities.tolist()
         if self.accelerations is not None:
             out["accelerations"] = self.accelerations.tolist()
+        if self._polynomial:
+            out["coefficients"] = self._coefficients.tolist()
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, object]) -> Trajectory:
+        """Inverse of :meth:`to_dict` (a ``coefficients`` entry makes a polynomial trajectory)."""
         try:
+            if data.get("coefficients") is not None:
+                return cls.from_polynomials(
+                    data["times"],  # type: ignore[arg-type]
+                    data["coefficients"],  # type: ignore[arg-type]
+                    data.get("joint_names"),  # type: ignore[arg-type]
+                    continuous_velocity=False,
+                )
             return cls(
                 data["times"],  # type: ignore[arg-type]
                 data["positions"],  # type: ignore[arg-type]
@@ -259,7 +341,11 @@ class Trajectory:
             raise ConfigError(f"trajectory data lacks {exc}; needs 'times' and 'positions'") from exc
 
     def save(self, path: str | Path) -> Path:
-        """Write to ``.csv``, ``.json`` or ``.npz`` (by suffix). Returns the path."""
+        """Write to ``.csv``, ``.json`` or ``.npz`` (by suffix). Returns the path.
+
+        JSON and NPZ are exact (a polynomial trajectory keeps its coefficients). CSV holds the samples only: a
+        polynomial trajectory saved as CSV loads back as the quintic Hermite through its samples.
+        """
         path = Path(path)
         suffix = path.suffix.lower()
         if suffix == ".json":
@@ -330,6 +416,67 @@ def _finite(value: npt.ArrayLike, name: str, ndim: int) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise InvalidInputError(name, "values with NaN or inf", "finite values")
     return array
+
+
+def _polyval(c: np.ndarray, tau: np.ndarray, order: int) -> np.ndarray:
+    """Evaluate the ``order``-th derivative of per-segment polynomials ``c`` (m, d+1, n) at ``tau`` (m,)."""
+    d = _derivative(c, order) if order else c
+    out = d[:, -1].copy()
+    for i in range(d.shape[1] - 2, -1, -1):
+        out = d[:, i] + tau[:, None] * out
+    return out
+
+
+def _derivative(c: np.ndarray, order: int) -> np.ndarray:
+    """Coefficients of the ``order``-th derivative of ``c`` (m, d+1, n) in the same power basis."""
+    degree = c.shape[1] - 1
+    if order > degree:
+        return np.zeros((c.shape[0], 1, c.shape[2]))
+    k = np.arange(order, degree + 1)
+    factor = np.ones(k.shape)
+    for j in range(order):
+        factor = factor * (k - j)
+    return c[:, order:] * factor[None, :, None]
+
+
+def concatenate(trajectories: Sequence[Trajectory], *, continuity_tol: float = 1e-6) -> Trajectory:
+    """Join trajectories end to start into one (each later one is shifted to start where the previous ends).
+
+    Args:
+        trajectories: At least one trajectory, same joint names; each starts at the previous one's final position
+            and velocity (within ``continuity_tol``).
+        continuity_tol: Largest position [rad] / velocity [rad]/[s] jump allowed at a junction.
+
+    Returns:
+        A polynomial trajectory (exact: every piece keeps its own polynomials).
+    """
+    if len(trajectories) == 0:
+        raise InvalidInputError("trajectories", 0, "at least one trajectory")
+    first = trajectories[0]
+    times = [first.times]
+    coefficients = [first.coefficients]
+    degree = max(tr.coefficients.shape[1] for tr in trajectories)
+    end = first.times[-1]
+    for i, tr in enumerate(trajectories[1:], start=1):
+        if tr.joint_names != first.joint_names:
+            raise InvalidInputError(f"trajectories[{i}]", tr.joint_names, f"joint names {first.joint_names}")
+        shifted = tr.times - tr.times[0] + end
+        times.append(shifted[1:])
+        coefficients.append(tr.coefficients)
+        end = shifted[-1]
+    padded = [np.pad(c, ((0, 0), (0, degree - c.shape[1]), (0, 0))) for c in coefficients]
+    smooth = all(tr.interpolation != "linear" for tr in trajectories)
+    try:
+        return Trajectory.from_polynomials(
+            np.concatenate(times),
+            np.concatenate(padded),
+            first.joint_names,
+            continuity_tol=continuity_tol,
+            continuous_velocity=smooth,
+        )
+    except InvalidInputError as exc:
+        expected = "each trajectory starting where the previous ends"
+        raise InvalidInputError("trajectories", exc.received, expected) from None
 
 
 def _segment_coefficients(t: np.ndarray, q: np.ndarray, v: np.ndarray | None, a: np.ndarray | None) -> np.ndarray:

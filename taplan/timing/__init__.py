@@ -1,0 +1,23 @@
+"""Time parameterisation: TOPP-RA retiming that never exceeds the limits, jerk-limited trajectories, casadi
+trajectory optimisation, Cartesian straight lines through IK, and dual-arm synchronisation.
+
+Module map: :mod:`~taplan.timing.path` (geometric path ``q(s)``), :mod:`~taplan.timing.constraints` (toppra
+constraint exact on grid segments), :mod:`~taplan.timing.toppra_retime` (``retime``),
+:mod:`~taplan.timing.limits_check` (exact peak usage of the limits).
+"""
+
+from __future__ import annotations
+
+from taplan.timing.limits_check import LimitUsage, limit_usage, sampled_limit_usage
+from taplan.timing.path import Path
+from taplan.timing.toppra_retime import PathProfile, retime, time_optimal_profile
+
+__all__ = [
+    "LimitUsage",
+    "Path",
+    "PathProfile",
+    "limit_usage",
+    "retime",
+    "sampled_limit_usage",
+    "time_optimal_profile",
+]

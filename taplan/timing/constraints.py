@@ -1,0 +1,73 @@
+"""toppra constraint that holds joint velocity and acceleration limits inside each grid segment, not only at
+gridpoints.
+
+TOPP-RA keeps the path acceleration ``u_i`` constant on ``[s_i, s_{i+1}]``, so the squared path speed is
+``x(s) = x_i + 2 u_i (s - s_i)``. At any point ``s`` of the segment the joint acceleration
+
+.. math::
+
+    \\ddot q(s) = q'(s)\\,u_i + q''(s)\\,x(s) = \\big(q'(s) + 2 (s - s_i)\\, q''(s)\\big)\\, u_i + q''(s)\\, x_i
+
+and the squared path speed ``x_i + 2 (s - s_i) u_i`` are linear in the stage variables ``(u_i, x_i)``. This
+constraint imposes them at the segment's start, at interior fractions (default its middle) and at its end, which is
+toppra's "interpolation" scheme extended with interior points. Velocity rows are normalised
+(``x(s) / x_max(s) <= 1``) so ``F`` and ``g`` are the same at every stage.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from toppra.constraint import DiscretizationType
+from toppra.constraint.linear_constraint import LinearConstraint
+
+__all__ = ["SegmentLimitConstraint"]
+
+_TINY_TANGENT = 1e-12  # [rad] per unit s: |q'| below this does not bound the path speed
+
+
+class SegmentLimitConstraint(LinearConstraint):
+    """Joint velocity and acceleration limits at several points of every TOPP-RA grid segment.
+
+    Args:
+        velocity: Maximum |joint velocity| [rad]/[s], shape (n,).
+        acceleration: Maximum |joint acceleration| [rad]/[s]², shape (n,).
+        fractions: Interior points of each segment where the limits are imposed as well, in (0, 1).
+    """
+
+    def __init__(self, velocity: np.ndarray, acceleration: np.ndarray, fractions: Sequence[float] = (0.5,)) -> None:
+        super().__init__()
+        self.velocity = np.asarray(velocity, dtype=float)
+        self.acceleration = np.asarray(acceleration, dtype=float)
+        self.fractions = np.asarray(fractions, dtype=float)
+        self.dof = self.velocity.shape[0]
+        self.identical = True
+        self.discretization_type = DiscretizationType.Collocation  # rows already cover the whole segment
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):  # noqa: ANN001, ANN201 (toppra API)
+        n = self.dof
+        grid = np.asarray(gridpoints, dtype=float)
+        count = grid.shape[0]
+        fractions = np.concatenate([[0.0], self.fractions, [1.0]])
+        m, interior = fractions.shape[0], self.fractions.shape[0]
+        offset = np.zeros((count, m))
+        offset[:-1] = np.diff(grid)[:, None] * fractions[None, :]  # last stage: every point at s_end
+        s = np.minimum(grid[:, None] + offset, grid[-1])
+        d1 = np.asarray(path(s.ravel(), 1)).reshape(count, m, n)
+        d2 = np.asarray(path(s.ravel(), 2)).reshape(count, m, n)
+        a_acc = (d1 + 2.0 * offset[..., None] * d2).reshape(count, m * n)
+        b_acc = d2.reshape(count, m * n)
+        tangent = np.maximum(np.abs(d1[:, 1:-1]), _TINY_TANGENT)
+        x_max = np.min((self.velocity / tangent) ** 2, axis=2)  # (count, interior)
+        a_vel = 2.0 * offset[:, 1:-1] / x_max
+        b_vel = 1.0 / x_max
+        a = np.hstack([a_acc, a_vel])
+        b = np.hstack([b_acc, b_vel])
+        rows = m * n
+        F = np.zeros((2 * rows + interior, rows + interior))
+        F[:rows, :rows] = np.eye(rows)
+        F[rows : 2 * rows, :rows] = -np.eye(rows)
+        F[2 * rows :, rows:] = np.eye(interior)
+        g = np.concatenate([np.tile(self.acceleration, m), np.tile(self.acceleration, m), np.ones(interior)])
+        return a, b, np.zeros_like(a), F, g, None, None
