@@ -1,0 +1,227 @@
+"""The control-loop stepper: one QP per cycle, both arms in one problem, limits that always hold."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from taplan._validation import as_positive, as_vector
+from taplan.errors import InvalidInputError, UnknownNameError
+from taplan.ik._kinematics import Kinematics
+from taplan.ik._targets import as_transform
+from taplan.ik.limits import AccelerationLimit, CollisionLimit, PositionLimit, TargetBraking, VelocityLimit
+from taplan.ik.limits.limit import BoxLimit, RowLimit
+from taplan.ik.problem import Problem, ProblemBuilder, project
+from taplan.ik.solvers import QPSolver, get_solver
+from taplan.ik.tasks import FrameTask, PostureTask
+from taplan.ik.tasks.task import Task
+from taplan.limits import JointLimits
+from taplan.robot import Robot
+
+__all__ = ["DifferentialIK", "IKStep"]
+
+
+class IKStep(NamedTuple):
+    """Result of one :meth:`DifferentialIK.step`.
+
+    Attributes:
+        velocity: Commanded joint velocity [rad/s], shape (nq,); within the velocity and acceleration limits.
+        q: Next configuration ``q + velocity dt`` [rad], shape (nq,).
+        min_distance: Lower bound of the smallest arm-arm capsule distance at the step's start [m] (inf without
+            collision avoidance).
+        iterations: Solver iterations (0 for backends that do not report them).
+        problem: The QP that was solved (the stepper's buffers: overwritten at the next step; ``.copy()`` it).
+    """
+
+    velocity: np.ndarray
+    q: np.ndarray
+    min_distance: float
+    iterations: int
+    problem: Problem
+
+
+class DifferentialIK:
+    """Differential inverse kinematics for control loops.
+
+    Each ``step`` solves one QP for the joint velocity that best moves the task frames toward their targets,
+    subject to position, velocity and acceleration limits and arm-arm collision avoidance, and integrates it over
+    ``dt``. The velocity box is never empty (bounds are relaxed in the order documented in
+    :mod:`taplan.ik.limits.limit`), so a step never fails for infeasibility; the returned velocity always respects
+    the velocity and acceleration limits (given a previous velocity within the velocity limits).
+
+    Args:
+        robot: The robot.
+        dt: Control period [s], > 0.
+        limits: Joint limits; default ``robot.planning_limits``.
+        solver: Backend name (``"proxqp"``, ``"daqp"``, ``"quadprog"``, ``"osqp"``) or a ``QPSolver``.
+        frames: Task frames (one :class:`~taplan.ik.tasks.FrameTask` each, cost 1 per [m] and per [rad]).
+        posture_cost: Cost per [rad] of the posture task (toward ``posture`` or the ``reset`` configuration).
+        damping: Levenberg-Marquardt damping on the step.
+        collision: Keep the ``left`` and ``right`` groups' capsules ``collision_margin`` apart (if the robot has
+            both groups and capsules).
+        acceleration_limit: Bound ``|v - v_prev| <= a dt`` and brake toward position limits and task targets.
+        position_cost: Frame tasks' position cost: a number or per root axis (3,).
+        orientation_cost: Frame tasks' orientation cost: a number or per root axis (3,).
+        collision_margin: Minimum capsule distance [m].
+        collision_influence: Distance below which a capsule pair is constrained [m].
+        target_braking: With the acceleration limit, brake toward the task target (no overshoot).
+        posture: Posture reference [rad] (nq,); default: the configuration given to ``reset``.
+        extra_tasks: More tasks (e.g. a :class:`~taplan.ik.tasks.RelativeFrameTask`).
+        extra_limits: More limits.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        dt: float = 0.01,
+        limits: JointLimits | None = None,
+        solver: str | QPSolver = "proxqp",
+        frames: Sequence[str] = ("left_ee", "right_ee"),
+        posture_cost: float = 1e-2,
+        damping: float = 1e-3,
+        collision: bool = True,
+        acceleration_limit: bool = True,
+        *,
+        position_cost: npt.ArrayLike = 1.0,
+        orientation_cost: npt.ArrayLike = 1.0,
+        collision_margin: float = 0.02,
+        collision_influence: float = 0.10,
+        target_braking: bool = True,
+        posture: npt.ArrayLike | None = None,
+        extra_tasks: Sequence[Task] = (),
+        extra_limits: Sequence[BoxLimit | RowLimit] = (),
+    ) -> None:
+        self.robot = robot
+        self.dt = as_positive(dt, "dt")
+        self.limits = robot.planning_limits if limits is None else limits
+        if not isinstance(self.limits, JointLimits) or self.limits.names != robot.joint_names:
+            raise InvalidInputError("limits", self.limits, f"JointLimits over the robot's joints {robot.joint_names}")
+        if isinstance(frames, str):
+            frames = (frames,)
+        self.frames = tuple(frames)
+        self.kin = Kinematics(robot.model)
+        self.tasks: dict[str, FrameTask] = {
+            f: FrameTask(robot.frame_id(f), position_cost, orientation_cost, name=f) for f in self.frames
+        }
+        self.posture_task = PostureTask(robot.nq, posture_cost)
+        self._posture = None if posture is None else robot.check_configuration(posture, "posture")
+        lim = self.limits
+        self.acceleration_limit = bool(acceleration_limit)
+        acc = lim.acceleration if self.acceleration_limit else None
+        box: list[BoxLimit | RowLimit] = [VelocityLimit(lim.velocity), PositionLimit(lim.lower, lim.upper, acc)]
+        if acc is not None:
+            box.append(AccelerationLimit(acc))
+            if target_braking:
+                box.append(TargetBraking(acc))
+        self.collision: CollisionLimit | None = None
+        if collision and {"left", "right"} <= set(robot.groups):
+            pairs = robot.capsule_pairs("left", "right")
+            if pairs:
+                self.collision = CollisionLimit(
+                    pairs, robot.model, collision_margin, collision_influence, acceleration=acc
+                )
+                box.append(self.collision)
+        tasks: list[Task] = [*self.tasks.values(), self.posture_task, *extra_tasks]
+        self.builder = ProblemBuilder(self.kin, tasks, [*box, *extra_limits], damping)
+        self.solver: QPSolver = get_solver(solver) if isinstance(solver, str) else solver
+        self._q = np.zeros(robot.nq)
+        self._v = np.zeros(robot.nq)
+        self._q_next = np.zeros(robot.nq)
+        self._initialised = False
+        self.reset(robot.home)
+
+    # ------------------------------------------------------------------------------------------------------ state
+    @property
+    def q(self) -> np.ndarray:
+        """Integrated configuration [rad] (nq,) (a copy)."""
+        return self._q.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Last commanded velocity [rad/s] (nq,) (a copy): the acceleration limit's state."""
+        return self._v.copy()
+
+    def reset(self, q: npt.ArrayLike, velocity: npt.ArrayLike | None = None) -> None:
+        """Restart from configuration ``q`` [rad] (nq,) with previous velocity ``velocity`` [rad/s] (default 0).
+
+        Every frame task's target becomes the frame's pose at ``q`` (hold), and the posture reference becomes ``q``
+        unless one was given.
+        """
+        q = self.robot.check_configuration(q, "q")
+        v = np.zeros(self.robot.nq) if velocity is None else as_vector(velocity, "velocity", self.robot.nq)
+        self._q[:] = q
+        self._v[:] = v
+        self.kin.update(q)
+        for task in self.tasks.values():
+            task.set_target_from_configuration(self.kin)
+        self.posture_task.set_target(q if self._posture is None else self._posture)
+        if self.collision is not None:
+            self.collision.reset()
+        self._initialised = True
+
+    def set_posture(self, q: npt.ArrayLike) -> None:
+        """Posture reference [rad] (nq,), kept across resets."""
+        self._posture = self.robot.check_configuration(q, "posture")
+        self.posture_task.set_target(self._posture)
+
+    def set_targets(self, targets: Mapping[str, Any]) -> None:
+        """Set frame targets without stepping: ``{frame: 4x4 | (position, quaternion_xyzw) | (7,)}``."""
+        if not isinstance(targets, Mapping):
+            raise InvalidInputError("targets", targets, "a mapping {frame name: pose}")
+        tasks = self.tasks
+        for frame, target in targets.items():
+            task = tasks.get(frame)
+            if task is None:
+                raise UnknownNameError("task frame", frame, self.frames)
+            if type(target) is np.ndarray and target.shape == (4, 4) and target.dtype == np.float64:
+                if not np.isfinite(target).all():
+                    raise InvalidInputError(f"targets[{frame!r}]", target, "finite values (no NaN or inf)")
+                task._set(target.copy())
+            else:
+                task._set(as_transform(target, f"targets[{frame!r}]"))
+
+    # ------------------------------------------------------------------------------------------------------- step
+    def step(self, targets: Mapping[str, Any] | None = None, q: npt.ArrayLike | None = None) -> IKStep:
+        """One control cycle.
+
+        Args:
+            targets: ``{frame: pose}`` with poses ``T_root_frame`` as 4x4, ``(position, quaternion_xyzw)`` or (7,);
+                a subset of ``frames`` is fine (the others keep their last target). None keeps all targets.
+            q: Measured configuration [rad] (nq,); None uses the stepper's own integrated state.
+
+        Returns:
+            The step: velocity [rad/s] and next configuration [rad], plus diagnostics.
+
+        Raises:
+            UnknownNameError: a target frame that is not a task frame.
+            InvalidInputError: a malformed target or ``q``.
+            SolverError: the QP backend failed (with the problem attached).
+        """
+        if targets:
+            self.set_targets(targets)
+        q_now = self._q if q is None else self.robot.check_configuration(q, "q")
+        problem = self.builder.build(q_now, self.dt, self._v)
+        v = project(problem, self.solver.solve(problem))
+        q_next = q_now + v * self.dt
+        self._q[:] = q_next
+        self._v[:] = v
+        collision = self.collision
+        return IKStep(
+            v.copy(),
+            q_next,
+            np.inf if collision is None else collision.min_distance,
+            self.solver.iterations,
+            problem,
+        )
+
+    def task_errors(self, q: npt.ArrayLike | None = None) -> dict[str, tuple[float, float]]:
+        """Per task frame ``(position error [m], orientation error [rad])`` at ``q`` (default: current state)."""
+        self.kin.update(self._q if q is None else self.robot.check_configuration(q, "q"))
+        out = {}
+        for frame, task in self.tasks.items():
+            e = task.compute_error(self.kin)
+            out[frame] = (float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])))
+        return out

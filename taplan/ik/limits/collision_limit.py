@@ -1,0 +1,160 @@
+"""Arm-arm collision avoidance: capsule pairs keep a minimum distance (velocity damper on the distance)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from taplan.collision import Capsule, segment_closest_points
+from taplan.errors import InvalidInputError
+from taplan.ik._kinematics import Kinematics
+from taplan.ik.limits.limit import RowLimit, StepContext
+
+__all__ = ["CollisionLimit", "capsule_pair_distance"]
+
+
+def capsule_pair_distance(
+    kin: Kinematics, first: Capsule, second: Capsule
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Distance between two capsules and its Jacobian at the configuration held by ``kin``.
+
+    Returns:
+        (distance [m] (negative when overlapping), its gradient ``dd/dq`` (nv,), the closest point on the first
+        capsule's axis [m] (3,), the closest point on the second [m] (3,)).
+    """
+    data = kin.data
+    Ma, Mb = data.oMi[first.joint], data.oMi[second.joint]
+    pa, pb, _, _ = segment_closest_points(
+        Ma.act(first.start), Ma.act(first.end), Mb.act(second.start), Mb.act(second.end)
+    )
+    delta = pa - pb
+    norm = float(np.linalg.norm(delta))
+    if norm > 1e-9:
+        n = delta / norm
+    else:  # axes intersect: any direction; use the one between the joint origins
+        n = Ma.translation - Mb.translation
+        n = n / max(float(np.linalg.norm(n)), 1e-12)
+    grad = np.zeros(kin.nv)
+    for joint, point, sign in ((first.joint, pa, 1.0), (second.joint, pb, -1.0)):
+        if joint == 0:
+            continue
+        J = kin.joint_jacobian(joint)
+        r = point - data.oMi[joint].translation
+        grad += sign * (n @ J[:3] + np.cross(r, n) @ J[3:])
+    return norm - first.radius - second.radius, grad, pa, pb
+
+
+class CollisionLimit(RowLimit):
+    r"""Keep every capsule pair at least ``margin`` apart.
+
+    For each pair closer than ``influence`` the distance ``d`` and its Jacobian ``J_d`` give one row of the
+    velocity-damper constraint
+
+    .. math::
+
+        J_d v \ge -\min\left(\gamma \frac{d - d_m}{dt},\ \sqrt{2 \alpha (d - d_m)}\right)
+
+    with ``d_m = margin``: one step closes at most the fraction ``γ`` of the gap, and (with an acceleration limit)
+    the approach speed is one the arms can still brake from at ``α = ½ Σ_j |J_d,j| a_j`` [m/s²]. Below the margin
+    the right-hand side becomes a separation speed. Rows are soft (one penalised slack each) so they never make the
+    QP infeasible; with the acceleration bound hard, an approach faster than the arms can brake is the only case
+    where the margin can be crossed.
+
+    The exact distances are only recomputed when they could have changed enough to matter: a point on an arm moves
+    at most ``reach Σ_j |Δq_j|`` (``reach`` bounds the distance from any arm joint to any capsule point), so until
+    ``reach ‖q − q_eval‖₁`` reaches the clearance ``min d − influence`` found at ``q_eval`` no pair can enter the
+    influence distance.
+
+    Args:
+        pairs: Capsule pairs (e.g. ``robot.capsule_pairs("left", "right")``).
+        model: Pinocchio model (to bound the reach).
+        margin: Minimum distance between capsule surfaces [m], >= 0.
+        influence: Distance below which a pair is constrained [m], > margin.
+        gain: Fraction ``γ`` of the gap a step may close, in (0, 1].
+        acceleration: Joint acceleration limits [rad/s²] (nv,), or None (no braking term).
+    """
+
+    name = "collision"
+
+    def __init__(
+        self,
+        pairs: Sequence[tuple[Capsule, Capsule]],
+        model: pin.Model,
+        margin: float = 0.02,
+        influence: float = 0.10,
+        gain: float = 0.5,
+        acceleration: np.ndarray | None = None,
+    ) -> None:
+        if not (np.isfinite(margin) and margin >= 0.0):
+            raise InvalidInputError("margin", margin, "a distance >= 0 [m]")
+        if not (np.isfinite(influence) and influence > margin):
+            raise InvalidInputError("influence", influence, f"a distance > margin ({margin}) [m]")
+        if not (np.isfinite(gain) and 0.0 < gain <= 1.0):
+            raise InvalidInputError("gain", gain, "a number in (0, 1]")
+        self.pairs = list(pairs)
+        self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
+        self.acceleration = None if acceleration is None else np.asarray(acceleration, dtype=float)
+        self.max_rows = len(self.pairs)
+        self.reach = _reach_bound(model, self.pairs)
+        self._q_eval = np.full(model.nv, np.nan)
+        self._clearance = -np.inf
+        self._min_distance = np.inf
+        self._scratch = np.empty(model.nv)
+        self.distances = np.full(len(self.pairs), np.inf)
+
+    def reset(self) -> None:
+        """Forget the last exact evaluation (e.g. after a jump in configuration)."""
+        self._q_eval[:] = np.nan
+        self._clearance = -np.inf
+
+    @property
+    def min_distance(self) -> float:
+        """A lower bound of the smallest pair distance at the last step's configuration [m]."""
+        return self._min_distance
+
+    def rows(self, ctx: StepContext, G: np.ndarray, h: np.ndarray) -> int:
+        if not self.pairs:
+            return 0
+        q = ctx.kin.q
+        s = self._scratch
+        np.subtract(q, self._q_eval, out=s)
+        np.abs(s, out=s)
+        travel = self.reach * float(s.sum())
+        if travel < self._clearance:  # nan-safe: a nan travel fails the test and forces an evaluation
+            self._min_distance = self._clearance + self.influence - travel
+            return 0
+        k = 0
+        dt = ctx.dt
+        for i, (first, second) in enumerate(self.pairs):
+            d, grad, _, _ = capsule_pair_distance(ctx.kin, first, second)
+            self.distances[i] = d
+            if d >= self.influence:
+                continue
+            gap = d - self.margin
+            rate = self.gain * gap / dt
+            if self.acceleration is not None and gap > 0.0:
+                alpha = 0.5 * float(np.abs(grad) @ self.acceleration)
+                rate = min(rate, float(np.sqrt(2.0 * alpha * gap)))
+            np.negative(grad, out=G[k])
+            h[k] = rate
+            k += 1
+        self._q_eval[:] = q
+        d_min = float(self.distances.min())
+        self._clearance = d_min - self.influence
+        self._min_distance = d_min
+        return k
+
+
+def _reach_bound(model: pin.Model, pairs: Sequence[tuple[Capsule, Capsule]]) -> float:
+    """Upper bound [m] of the distance from any joint origin on a capsule's chain to any point of that capsule."""
+    reach = 0.0
+    for capsule in {id(c): c for pair in pairs for c in pair}.values():
+        chain = 0.0
+        j = capsule.joint
+        while j > 0:
+            chain += float(np.linalg.norm(model.jointPlacements[j].translation))
+            j = model.parents[j]
+        reach = max(reach, chain + max(float(np.linalg.norm(capsule.start)), float(np.linalg.norm(capsule.end))))
+    return reach

@@ -1,0 +1,96 @@
+"""Limit base classes and the relaxed intersection that keeps the velocity box non-empty.
+
+Box limits bound each joint velocity ``v`` [rad/s] independently and become the QP's variable bounds. They are
+intersected in priority order (lowest first); when a later (softer) bound does not meet the interval built so far,
+it is relaxed to the nearest point of that interval instead of making the problem infeasible. The order used by
+:class:`taplan.ik.DifferentialIK` is:
+
+1. acceleration ``|v - v_prev| <= a dt`` (never relaxed),
+2. velocity ``|v| <= v_max`` (relaxed only if the previous velocity itself exceeds it: the joint then decelerates at
+   the acceleration limit),
+3. position (with braking distance; relaxed when the state is outside the limits or too fast to stop in time: the
+   joint then brakes or returns at the acceleration limit),
+4. braking toward the task target (relaxed like 3).
+
+Row limits (collision avoidance) are inequality rows ``G v <= h`` made soft by one slack variable each with a large
+penalty, so they can never make the QP infeasible either.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+
+import numpy as np
+
+from taplan.ik._kinematics import Kinematics
+
+__all__ = ["BoxLimit", "RowLimit", "StepContext", "intersect_relaxed"]
+
+
+@dataclass
+class StepContext:
+    """What limits see of the current step.
+
+    Attributes:
+        kin: Kinematics at the current configuration ``kin.q`` [rad].
+        dt: Step duration [s].
+        v_prev: Previous commanded velocity [rad/s], shape (nv,).
+        v_free: Minimiser of the objective without constraints [rad/s], shape (nv,) (filled by the problem
+            builder before the limits that need it; see ``needs_free_velocity``).
+    """
+
+    kin: Kinematics
+    dt: float
+    v_prev: np.ndarray
+    v_free: np.ndarray
+
+
+class BoxLimit(abc.ABC):
+    """A limit that bounds each joint velocity: ``lower <= v <= upper`` [rad/s].
+
+    Attributes:
+        name: Short name, used in ``Problem.relaxations``.
+        priority: Lower is harder; see the module docstring for the order.
+        needs_free_velocity: Whether ``bounds`` reads ``ctx.v_free``.
+    """
+
+    name: str = "limit"
+    priority: int = 50
+    needs_free_velocity: bool = False
+
+    @abc.abstractmethod
+    def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity bounds (lower, upper) [rad/s], each (nv,); ±inf where unbounded. Buffers may be re-used."""
+
+
+class RowLimit(abc.ABC):
+    """A limit written as soft inequality rows ``G v <= h`` (one slack variable per row).
+
+    Attributes:
+        name: Short name.
+        max_rows: Most rows it can write.
+    """
+
+    name: str = "rows"
+    max_rows: int = 0
+
+    @abc.abstractmethod
+    def rows(self, ctx: StepContext, G: np.ndarray, h: np.ndarray) -> int:
+        """Write up to ``max_rows`` rows into ``G`` (max_rows, nv) and ``h`` (max_rows,); return how many."""
+
+
+def intersect_relaxed(
+    lower: np.ndarray, upper: np.ndarray, new_lower: np.ndarray, new_upper: np.ndarray, scratch: np.ndarray
+) -> None:
+    """Intersect ``[lower, upper]`` with ``[new_lower, new_upper]`` in place, never emptying it.
+
+    Where the intervals meet, the result is their intersection; where the new one lies entirely above (below), the
+    result is the single point ``upper`` (``lower``), the admissible value closest to it. Requires
+    ``lower <= upper`` on entry; guarantees it on exit.
+    """
+    np.maximum(lower, new_lower, out=scratch)
+    np.minimum(scratch, upper, out=scratch)
+    np.minimum(upper, new_upper, out=upper)
+    np.maximum(upper, lower, out=upper)
+    lower[:] = scratch

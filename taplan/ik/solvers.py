@@ -1,0 +1,194 @@
+"""QP backends: a persistent, warm-started proxsuite dense QP (default) and the others through qpsolvers.
+
+Every backend solves the :class:`~taplan.ik.problem.Problem` formulation: variables ``[v, s]`` (velocity
+[rad/s] and one slack per soft row), box bounds on ``v`` as variable bounds, soft rows ``G v - s <= h``, ``s >= 0``.
+A failure raises :class:`taplan.errors.SolverError` with a copy of the problem attached; nothing returns ``None``.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any
+
+import numpy as np
+
+from taplan.errors import SolverError, UnknownNameError
+from taplan.ik.problem import Problem
+
+__all__ = ["QPSolver", "ProxQPSolver", "QPSolversSolver", "get_solver", "available_solvers", "SOLVERS"]
+
+SOLVERS = ("proxqp", "daqp", "quadprog", "osqp")
+_BIG = 1e20  # proxqp's and our stand-in for an infinite bound
+
+
+def available_solvers() -> list[str]:
+    """Backends usable here (installed), in taplan's order of preference."""
+    import qpsolvers
+
+    installed = set(qpsolvers.available_solvers)
+    out = []
+    for name in SOLVERS:
+        if name == "proxqp":
+            try:
+                import proxsuite  # noqa: F401
+            except ImportError:
+                continue
+            out.append(name)
+        elif name in installed:
+            out.append(name)
+    return out
+
+
+def get_solver(name: str, **options: Any) -> QPSolver:
+    """A new backend by name: ``"proxqp"`` (persistent dense QP), ``"daqp"``, ``"quadprog"`` or ``"osqp"``.
+
+    Raises:
+        UnknownNameError: an unknown or uninstalled backend (the message lists the installed ones).
+    """
+    valid = available_solvers()
+    if name not in valid:
+        raise UnknownNameError("QP solver", name, valid)
+    if name == "proxqp":
+        return ProxQPSolver(**options)
+    return QPSolversSolver(name, **options)
+
+
+class QPSolver(abc.ABC):
+    """A QP backend. ``solve`` returns the velocity part of the solution (nv,) [rad/s] (a buffer it re-uses)."""
+
+    name: str
+    iterations: int = 0
+
+    @abc.abstractmethod
+    def solve(self, problem: Problem) -> np.ndarray:
+        """Solve; raise ``SolverError`` (with ``problem.copy()``) on failure."""
+
+    def reset(self) -> None:  # noqa: B027 - optional hook
+        """Forget warm-start data."""
+
+
+class _ProxQPWorkspace:
+    """One proxsuite dense QP of fixed size and its input buffers."""
+
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int) -> None:
+        from proxsuite import proxqp
+
+        self.n, self.m = n, m
+        self.qp = proxqp.dense.QP(n + m, 0, m, True)
+        s = self.qp.settings
+        s.eps_abs = eps_abs
+        s.eps_rel = 0.0
+        s.max_iter = max_iter
+        s.compute_timings = False
+        s.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        self.solved = proxqp.QPSolverOutput.PROXQP_SOLVED
+        self.H = np.zeros((n + m, n + m))
+        self.g = np.zeros(n + m)
+        self.lo = np.zeros(n + m)
+        self.hi = np.full(n + m, _BIG)
+        self.C = np.zeros((m, n + m))
+        self.lower_rows = np.full(m, -_BIG)
+        self.out = np.zeros(n)
+        if m:
+            self.C[:, n:] = -np.eye(m)
+        self.initialised = False
+
+    def solve(self, problem: Problem) -> np.ndarray:
+        n, m = self.n, self.m
+        lo, hi = self.lo, self.hi
+        np.maximum(problem.lower, -_BIG, out=lo[:n])
+        np.minimum(problem.upper, _BIG, out=hi[:n])
+        qp = self.qp
+        if m == 0:
+            H, g, C, u, low = problem.H, problem.c, None, None, None
+        else:
+            H, g, C = self.H, self.g, self.C
+            H[:n, :n] = problem.H
+            H[n:, n:] = problem.slack_quadratic * np.eye(m)
+            g[:n] = problem.c
+            g[n:] = problem.slack_linear
+            C[:, :n] = problem.G
+            u, low = problem.h, self.lower_rows
+        if self.initialised:
+            qp.update(H=H, g=g, C=C, l=low, u=u, l_box=lo, u_box=hi)
+        else:
+            qp.init(H, g, None, None, C, low, u, lo, hi)
+            self.initialised = True
+        qp.solve()
+        results = qp.results
+        if results.info.status != self.solved:
+            self.initialised = False  # next call starts cold
+            raise SolverError(f"proxqp failed: {results.info.status}", problem.copy())
+        self.out[:] = results.x[:n]
+        self.iterations = int(results.info.iter)
+        return self.out
+
+
+class ProxQPSolver(QPSolver):
+    """proxsuite's dense ProxQP, one persistent QP object per problem size, warm-started from the last result.
+
+    Args:
+        eps_abs: Absolute tolerance on the KKT residuals (velocity units [rad/s]; the box is enforced exactly
+            afterwards by projection).
+        max_iter: Iteration limit.
+    """
+
+    name = "proxqp"
+
+    def __init__(self, eps_abs: float = 1e-9, max_iter: int = 1000) -> None:
+        self.eps_abs = float(eps_abs)
+        self.max_iter = int(max_iter)
+        self._workspaces: dict[tuple[int, int], _ProxQPWorkspace] = {}
+
+    def solve(self, problem: Problem) -> np.ndarray:
+        key = (problem.nv, problem.n_rows)
+        ws = self._workspaces.get(key)
+        if ws is None:
+            ws = self._workspaces[key] = _ProxQPWorkspace(key[0], key[1], self.eps_abs, self.max_iter)
+        out = ws.solve(problem)
+        self.iterations = ws.iterations
+        return out
+
+    def reset(self) -> None:
+        self._workspaces.clear()
+
+
+class QPSolversSolver(QPSolver):
+    """Any qpsolvers backend (``daqp``, ``quadprog``, ``osqp``, ...); no state between calls.
+
+    Args:
+        name: qpsolvers backend name.
+        **options: Passed to the backend (e.g. ``eps_abs`` for osqp).
+    """
+
+    def __init__(self, name: str, **options: Any) -> None:
+        self.name = name
+        defaults: dict[str, Any] = {"osqp": {"eps_abs": 1e-9, "eps_rel": 0.0, "max_iter": 20000, "polish": True}}.get(
+            name, {}
+        )
+        self.options = {**defaults, **options}
+
+    def solve(self, problem: Problem) -> np.ndarray:
+        import qpsolvers
+
+        n, m = problem.nv, problem.n_rows
+        lower = np.maximum(problem.lower, -1e9)
+        upper = np.minimum(problem.upper, 1e9)
+        if m == 0:
+            P, q, G, h, lb, ub = problem.H, problem.c, None, None, lower, upper
+        else:
+            P = np.zeros((n + m, n + m))
+            P[:n, :n] = problem.H
+            P[n:, n:] = problem.slack_quadratic * np.eye(m)
+            q = np.concatenate([problem.c, np.full(m, problem.slack_linear)])
+            G = np.hstack([problem.G, -np.eye(m)])
+            h = problem.h.copy()
+            lb = np.concatenate([lower, np.zeros(m)])
+            ub = np.concatenate([upper, np.full(m, 1e9)])
+        try:
+            x = qpsolvers.solve_qp(P, q, G, h, lb=lb, ub=ub, solver=self.name, **self.options)
+        except Exception as exc:  # backends raise their own types
+            raise SolverError(f"{self.name} failed: {exc}", problem.copy()) from exc
+        if x is None:
+            raise SolverError(f"{self.name} found no solution", problem.copy())
+        return np.asarray(x[:n], dtype=float)
