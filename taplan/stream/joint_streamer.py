@@ -1,0 +1,400 @@
+"""Online joint streaming with ruckig: any target stream in, a smooth limit-respecting command stream out.
+
+A :class:`JointStreamer` runs at the control period ``dt`` (e.g. 1/77 [s]). Targets arrive whenever they like
+(``set_target``); each ``step()`` returns the next command. Position, velocity and acceleration stay continuous
+across retargets because every new trajectory starts from the last emitted state. Limits:
+
+* velocity, acceleration and jerk: ruckig's guarantee, from a start state that ``reset`` checks;
+* position: taplan's, since the free ruckig ignores position limits. Targets are admitted into the bounds (clamped
+  or rejected, see ``on_out_of_bounds``), a target velocity is reduced until its braking stop fits inside the bounds,
+  and every new trajectory's position range (``position_extrema``) is checked; when it leaves the bounds the
+  streamer falls back to per-joint time-optimal profiles, then to a zero target velocity, then to braking.
+  Each emitted position is verified against the bounds as well.
+
+Safety: with no new target for ``timeout`` [s] the streamer brakes to rest along the shortest jerk-limited stop
+(ruckig's velocity interface), so a dead client never leaves the arm moving; a NaN/inf/wrong-size target raises
+:class:`~taplan.StreamError` and changes nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from taplan._validation import as_positive, as_vector
+from taplan.errors import InvalidInputError, StreamError
+from taplan.limits import JointLimits
+from taplan.stream._ruckig import FINISHED, RuckigAdapter
+from taplan.stream.safety import Watchdog, max_safe_velocity
+from taplan.stream.state import StreamState, StreamStatus
+
+__all__ = ["JointStreamer", "POSITION_TOLERANCE"]
+
+logger = logging.getLogger(__name__)
+
+POSITION_TOLERANCE = 1e-8  # [rad]: numerical slack of ruckig's position accuracy; emitted positions are clipped to it
+_SPEED_MARGIN = 1.0 - 1e-6  # keep admitted target speeds strictly inside the braking-room bound
+
+_POSITION, _BRAKE = 0, 1
+
+
+class JointStreamer:
+    """Turns irregular joint targets into a jerk-limited command stream at a fixed period.
+
+    Args:
+        limits: Joint limits (e.g. ``robot.planning_limits``); the streamer drives all ``limits.size`` joints in that
+            order.
+        dt: Control period [s], e.g. ``1 / 77``.
+        timeout: Longest time without a new target [s] before braking to rest; None disables it. Default 1.0 [s],
+            the robot's own heartbeat and chassis timeouts (a policy sending 16-step chunks at 30 Hz re-targets
+            every ~0.53 [s]). This is a dead man's switch: a single far target is followed for at most ``timeout``
+            unless it is re-sent; use ``timeout=None`` for one-shot targets (e.g. a human clicking).
+        on_out_of_bounds: What ``set_target`` does with a target outside the position bounds (beyond
+            ``POSITION_TOLERANCE``) or a target speed above the limit or above what the bounds allow braking from:
+            ``"clamp"`` (default) admits the nearest admissible target and flags ``StreamState.target_adjusted``;
+            ``"raise"`` raises :class:`~taplan.StreamError` and keeps the previous target.
+        synchronization: ruckig synchronisation of the joints: ``"time"`` (all joints arrive together, default),
+            ``"phase"`` (straight line in joint space when possible) or ``"none"`` (each joint time-optimal).
+        initial: Optional initial position [rad], shape (n,): calls ``reset(initial)``.
+
+    Example:
+        >>> streamer = JointStreamer(robot.planning_limits, dt=1 / 77, timeout=None, initial=robot.home)
+        >>> streamer.set_target(q_goal)
+        >>> while not (state := streamer.step()).reached:
+        ...     publish(state.position)
+    """
+
+    def __init__(
+        self,
+        limits: JointLimits,
+        dt: float,
+        *,
+        timeout: float | None = 1.0,
+        on_out_of_bounds: Literal["clamp", "raise"] = "clamp",
+        synchronization: Literal["time", "phase", "none"] = "time",
+        initial: npt.ArrayLike | None = None,
+    ) -> None:
+        if not isinstance(limits, JointLimits):
+            raise InvalidInputError("limits", type(limits).__name__, "a taplan.JointLimits")
+        self.limits = limits
+        self.dt = as_positive(dt, "dt")
+        if timeout is not None:
+            timeout = as_positive(timeout, "timeout")
+        if on_out_of_bounds not in ("clamp", "raise"):
+            raise InvalidInputError("on_out_of_bounds", on_out_of_bounds, "'clamp' or 'raise'")
+        if synchronization not in ("time", "phase", "none"):
+            raise InvalidInputError("synchronization", synchronization, "'time', 'phase' or 'none'")
+        self.timeout = timeout
+        self.on_out_of_bounds = on_out_of_bounds
+        self.synchronization = synchronization
+        self.n = limits.size
+        self._lower = np.array(limits.lower)
+        self._upper = np.array(limits.upper)
+        self._vmax = np.array(limits.velocity)
+        self._amax = np.array(limits.acceleration)
+        self._jmax = np.array(limits.jerk)
+        self._adapter = RuckigAdapter(limits, self.dt)
+        self._adapter.set_bounds(self._lower, self._upper, POSITION_TOLERANCE)
+        self._watchdog = Watchdog(timeout)
+        self._zeros = np.zeros(self.n)
+        self._state: StreamState | None = None
+        self._time = 0.0
+        self._mode = _POSITION
+        self._pending: int | None = None  # _POSITION (new target) or _BRAKE (stop request), applied at next step
+        self._target_position = self._zeros
+        self._target_velocity = self._zeros
+        self._target_moving = False
+        self._target_adjusted = False
+        self._requested: tuple[np.ndarray, np.ndarray | None] | None = None
+        self._has_target = False
+        self.last_fault: str | None = None
+        if initial is not None:
+            self.reset(initial)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Joint names, in command order."""
+        return self.limits.names
+
+    @property
+    def time(self) -> float:
+        """Stream time since ``reset`` [s]."""
+        return self._time
+
+    @property
+    def state(self) -> StreamState:
+        """The last emitted state (after ``reset``: the initial state)."""
+        if self._state is None:
+            raise StreamError("the streamer has no state yet: call reset(position) with the measured position first")
+        return self._state
+
+    @property
+    def target(self) -> tuple[np.ndarray, np.ndarray]:
+        """The admitted target: positions [rad] and velocities [rad]/[s], shape (n,) each."""
+        return self._target_position.copy(), self._target_velocity.copy()
+
+    @property
+    def requested_target(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The last target as requested, before admission (None before any target)."""
+        return self._requested
+
+    # ------------------------------------------------------------------ commands
+    def reset(
+        self,
+        position: npt.ArrayLike,
+        velocity: npt.ArrayLike | None = None,
+        acceleration: npt.ArrayLike | None = None,
+        *,
+        clamp: bool = False,
+    ) -> StreamState:
+        """Start from a measured state, forgetting any target.
+
+        Args:
+            position: Measured position [rad], shape (n,), within the bounds (``clamp=True`` clamps it instead: the
+                first command then differs from the measurement by the excursion).
+            velocity: Measured velocity [rad]/[s], shape (n,), within the velocity limit; default zero.
+            acceleration: Measured acceleration [rad]/[s]², shape (n,), within the limit; default zero.
+            clamp: Clamp an out-of-bounds position instead of raising.
+
+        Returns:
+            The initial state: ``IDLE`` at rest, ``STOPPING`` when moving (the streamer brakes until a target comes).
+
+        Raises:
+            InvalidInputError: Wrong shape, non-finite values, a state outside the limits, or a motion that cannot
+                stop inside the position bounds.
+        """
+        n = self.n
+        q = as_vector(position, "position", n).copy()
+        v = self._zeros.copy() if velocity is None else as_vector(velocity, "velocity", n).copy()
+        a = self._zeros.copy() if acceleration is None else as_vector(acceleration, "acceleration", n).copy()
+        outside = (q < self._lower - POSITION_TOLERANCE) | (q > self._upper + POSITION_TOLERANCE)
+        if np.any(outside) and not clamp:
+            i = int(np.flatnonzero(outside)[0])
+            raise InvalidInputError(
+                "position",
+                f"{self.names[i]} = {q[i]:.6g} rad",
+                f"within [{self._lower[i]:.6g}, {self._upper[i]:.6g}] rad (or reset(..., clamp=True))",
+            )
+        np.clip(q, self._lower, self._upper, out=q)
+        _check_magnitude(v, self._vmax, "velocity", self.names, "rad/s")
+        _check_magnitude(a, self._amax, "acceleration", self.names, "rad/s^2")
+        # ruckig keeps the limits from a start state only if |a| <= sqrt(2 j (vmax - |v|)) (no unavoidable overshoot)
+        reachable = np.sqrt(2.0 * self._jmax * np.maximum(self._vmax - np.abs(v), 0.0))
+        bad = (np.abs(a) > reachable + 1e-9) & (np.sign(a) == np.sign(v))
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise InvalidInputError(
+                "acceleration",
+                f"{self.names[i]} = {a[i]:.6g} rad/s^2 at {v[i]:.6g} rad/s",
+                f"|a| <= sqrt(2 jerk (vmax - |v|)) = {reachable[i]:.6g} rad/s^2, or the velocity limit is overshot",
+            )
+        adapter = self._adapter
+        adapter.set_state(q.tolist(), v.tolist(), a.tolist())
+        moving = bool(np.any(v != 0.0) or np.any(a != 0.0))
+        if moving:
+            adapter.set_brake()
+            adapter.update()
+            if adapter.leaves_bounds():
+                raise InvalidInputError(
+                    "velocity", v, "a motion that can stop inside the position bounds (it would overshoot them)"
+                )
+            adapter.set_state(q.tolist(), v.tolist(), a.tolist())
+            adapter.set_brake()
+            self._mode = _BRAKE
+        else:
+            adapter.set_position_target(q.tolist(), self._zeros.tolist(), self.synchronization)
+            self._mode = _POSITION
+        self._time = 0.0
+        self._pending = None
+        self._target_position = q.copy()
+        self._target_velocity = self._zeros.copy()
+        self._target_moving = False
+        self._target_adjusted = False
+        self._requested = None
+        self._has_target = False
+        self._watchdog.clear()
+        self.last_fault = None
+        status = StreamStatus.STOPPING if moving else StreamStatus.IDLE
+        self._state = StreamState(0.0, q, v, a, self._zeros.copy(), status)
+        return self._state
+
+    def set_target(self, positions: npt.ArrayLike, velocities: npt.ArrayLike | None = None) -> bool:
+        """Aim at a new target from the next ``step()`` on (the latest call before a step wins).
+
+        Args:
+            positions: Target position [rad], shape (n,).
+            velocities: Target velocity [rad]/[s], shape (n,); default zero (stop on the target). A target reached
+                with a velocity is followed by a smooth stop unless a new target arrives.
+
+        Returns:
+            True when the target was adjusted to stay inside the limits (``on_out_of_bounds="clamp"``).
+
+        Raises:
+            StreamError: Wrong size, NaN or inf, or (``on_out_of_bounds="raise"``) a target outside the limits. The
+                stream keeps its previous target and motion.
+        """
+        q = _target_vector(positions, "positions", self.n)
+        v = self._zeros if velocities is None else _target_vector(velocities, "velocities", self.n)
+        raising = self.on_out_of_bounds == "raise"
+        adjusted = False
+        outside = (q < self._lower - POSITION_TOLERANCE) | (q > self._upper + POSITION_TOLERANCE)
+        if np.any(outside):
+            if raising:
+                i = int(np.flatnonzero(outside)[0])
+                raise StreamError(
+                    f"target positions: {self.names[i]} = {q[i]:.6g} rad is outside "
+                    f"[{self._lower[i]:.6g}, {self._upper[i]:.6g}] rad; the previous target is kept"
+                )
+            adjusted = True
+        q_admitted = np.clip(q, self._lower, self._upper)
+        if velocities is not None:
+            room = np.where(v >= 0.0, self._upper - q_admitted, q_admitted - self._lower)
+            # ruckig reports a moving target as reached up to one period late, having coasted on at the target
+            # velocity: the braking stop must fit in the room left after that (v1 fits the room, v2 <= v1 fits
+            # room - v1 dt, hence d(v2) + v2 dt <= room)
+            v1 = max_safe_velocity(room, self._amax, self._jmax)
+            v2 = max_safe_velocity(room - v1 * self.dt, self._amax, self._jmax)
+            speed_cap = np.minimum(self._vmax, v2 * _SPEED_MARGIN)
+            fast = np.abs(v) > speed_cap
+            if np.any(fast):
+                if raising:
+                    i = int(np.flatnonzero(fast)[0])
+                    raise StreamError(
+                        f"target velocities: {self.names[i]} = {v[i]:.6g} rad/s exceeds {speed_cap[i]:.6g} rad/s "
+                        "(velocity limit, or the fastest speed that can still stop inside the bounds); "
+                        "the previous target is kept"
+                    )
+                v = np.clip(v, -speed_cap, speed_cap)
+                adjusted = True
+        self._requested = (
+            np.array(positions, dtype=float),
+            None if velocities is None else np.array(velocities, dtype=float),
+        )
+        self._target_position = q_admitted
+        self._target_velocity = np.array(v, dtype=float)
+        self._target_moving = bool(np.any(self._target_velocity != 0.0))
+        self._target_adjusted = adjusted
+        self._pending = _POSITION
+        self._has_target = True
+        self._watchdog.feed(self._time)
+        return adjusted
+
+    def stop(self) -> None:
+        """Brake smoothly to rest from the next ``step()`` on (a new target resumes motion)."""
+        self.state  # noqa: B018 (raises before reset)
+        self._pending = _BRAKE
+
+    def step(self) -> StreamState:
+        """Advance one period ``dt`` and return the command for it.
+
+        Raises:
+            StreamError: Before ``reset``, or when even braking cannot be computed (never observed).
+        """
+        if self._state is None:
+            raise StreamError("the streamer has no state yet: call reset(position) with the measured position first")
+        adapter = self._adapter
+        fault = None
+        pending = self._pending
+        if pending is not None:
+            self._pending = None
+            if pending == _POSITION:
+                self._mode = _POSITION
+                adapter.set_position_target(
+                    self._target_position.tolist(), self._target_velocity.tolist(), self.synchronization
+                )
+            else:
+                self._mode = _BRAKE
+                adapter.set_brake()
+        elif (
+            self._mode == _POSITION and self._watchdog.expired(self._time) and self._state.status is StreamStatus.MOVING
+        ):
+            self._mode = _BRAKE
+            adapter.set_brake()
+        try:
+            result = adapter.update()
+        except StreamError as exc:
+            fault = str(exc)
+            result = self._brake_now()
+        out = adapter.out
+        new_calculation = out.new_calculation
+        if new_calculation and adapter.leaves_bounds():
+            result = self._fallback(result)
+        position = np.array(out.new_position)
+        velocity = np.array(out.new_velocity)
+        acceleration = np.array(out.new_acceleration)
+        jerk = np.array(out.new_jerk)
+        np.clip(position, self._lower, self._upper, out=position)  # ruckig's slack: at most POSITION_TOLERANCE
+        out.pass_to_input(adapter.inp)
+        if self._mode == _POSITION:
+            if result == FINISHED:
+                if self._target_moving:  # reached a moving target and nothing newer: stop smoothly
+                    status = StreamStatus.MOVING
+                    self._mode = _BRAKE
+                    adapter.set_brake()
+                else:
+                    status = StreamStatus.REACHED if self._has_target else StreamStatus.IDLE
+            else:
+                status = StreamStatus.MOVING
+        else:
+            status = StreamStatus.STOPPED if result == FINISHED else StreamStatus.STOPPING
+        if fault is not None:
+            self.last_fault = fault
+        self._time += self.dt
+        self._state = StreamState(
+            self._time,
+            position,
+            velocity,
+            acceleration,
+            jerk,
+            status,
+            new_calculation,
+            self._target_adjusted,
+            fault,
+        )
+        return self._state
+
+    # ------------------------------------------------------------------ internals
+    def _brake_now(self) -> int:
+        self._mode = _BRAKE
+        self._adapter.set_brake()
+        return self._adapter.update()
+
+    def _fallback(self, result: int) -> int:
+        """The new trajectory leaves the position bounds: try safer variants from the same start state.
+
+        Order: the target position at rest with per-joint time-optimal profiles (no synchronisation; a target
+        velocity is dropped, since a moving target can require swinging out beyond the bounds), then braking.
+        """
+        adapter = self._adapter
+        if self._mode == _POSITION:
+            adapter.set_position_target(self._target_position.tolist(), self._zeros.tolist(), "none")
+            result = adapter.update()
+            if not adapter.leaves_bounds():
+                if self._target_moving:
+                    self._target_velocity = self._zeros
+                    self._target_moving = False
+                    self._target_adjusted = True
+                return result
+            result = self._brake_now()
+            if not adapter.leaves_bounds():
+                return result
+        logger.warning("stream: the braking trajectory leaves the position bounds; positions are clipped")
+        return result
+
+
+def _target_vector(value: npt.ArrayLike, name: str, size: int) -> np.ndarray:
+    try:
+        return as_vector(value, f"target {name}", size).copy()
+    except InvalidInputError as exc:
+        raise StreamError(f"{exc}; the target was rejected and the stream keeps its last good motion") from None
+
+
+def _check_magnitude(values: np.ndarray, limit: np.ndarray, name: str, names: tuple[str, ...], unit: str) -> None:
+    over = np.abs(values) > limit * (1.0 + 1e-12)
+    if np.any(over):
+        i = int(np.flatnonzero(over)[0])
+        raise InvalidInputError(name, f"{names[i]} = {values[i]:.6g} {unit}", f"|{name}| <= {limit[i]:.6g} {unit}")
