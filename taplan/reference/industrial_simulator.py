@@ -224,56 +224,37 @@ class IndustrialSimulator:
             ct = off / 1e9
         rem_after = span - np.where(steps > 0, _last_offset(off, first_row, steps), 0)
 
-        # ---- 3. states of the steps
-        q_rows = np.empty((seg_of_row.size, n))
-        v_rows = np.empty((seg_of_row.size, n))
-        herm = kind[seg_of_row] == _HERMITE
-        if herm.any():
-            s = seg_of_row[herm]
-            segs = np.flatnonzero(kind == _HERMITE)
-            dt = to_sec(span[segs]) if seed else span[segs] / 1e9
-            x0, x1, v0, v1 = P0[segs], P1[segs], V0[segs], V1[segs]
-            dt2 = py_pow(dt, 2)[:, None]
-            dt3 = py_pow(dt, 3)[:, None]
-            dtc = dt[:, None]
-            delta_x = x1 - x0
-            dv = v1 + v0
-            a1 = 6 * delta_x / dt2 - 2 * (dv + v0) / dtc
-            a2 = -12 * delta_x / dt3 + 6 * dv / dt2
-            lookup = np.full(S, -1)
-            lookup[segs] = np.arange(segs.size)
-            j = lookup[s]
-            c = ct[herm][:, None]
-            c2 = py_pow(ct[herm], 2)[:, None]
-            c3 = py_pow(ct[herm], 3)[:, None]
-            q_rows[herm] = x0[j] + v0[j] * c + a1[j] * c2 / 2 + a2[j] * c3 / 6
-            v_rows[herm] = v0[j] + a1[j] * c + a2[j] * c2 / 2
-        lin = ~herm
-        if lin.any():  # intended mode only
-            s = seg_of_row[lin]
-            alpha = (off[lin] / T_row[lin])[:, None]
-            q_rows[lin] = P0[s] + alpha * (P1[s] - P0[s])
-            v_rows[lin] = (P1[s] - P0[s]) / (T_row[lin] / 1e9)[:, None]
-
-        # ---- 4. interleave steps and final moves into one update stream
+        # ---- 3. one row per update: each segment's steps, then its final move (the goal point itself)
         count = steps + 1
-        seg_first_event = np.cumsum(count) - count
         E = int(count.sum())
-        step_event = seg_first_event[seg_of_row] + (k - 1)
+        seg_first_event = np.cumsum(count) - count
         final_event = seg_first_event + steps
+        seg_of_event = np.repeat(np.arange(S), count)
+        is_step = np.ones(E, dtype=bool)
+        is_step[final_event] = False
+        ct_event = np.zeros(E)
+        ct_event[is_step] = ct
+        off_event = np.zeros(E, dtype=np.int64)
+        off_event[is_step] = off
         positions = np.empty((E, n))
         velocities = np.empty((E, n))
-        sleeps = np.empty(E, dtype=np.int64)
-        positions[step_event] = q_rows
-        velocities[step_event] = v_rows
-        sleeps[step_event] = self.step_sleep_ns
+        if (kind == _HERMITE).any():
+            self._hermite_rows(kind, span, P0, P1, V0, V1, seg_of_event, ct_event, positions, velocities, seed)
+        if (kind == _LINEAR).any():
+            rows = np.flatnonzero(kind[seg_of_event] == _LINEAR)
+            s_l = seg_of_event[rows]
+            d = P1[s_l] - P0[s_l]
+            positions[rows] = P0[s_l] + (off_event[rows] / span[s_l])[:, None] * d
+            velocities[rows] = d / (span[s_l] / 1e9)[:, None]
         positions[final_event] = P1
         v_final = V1.copy()
         if not seed:
             no_v = ~w.has_velocities[goal]
-            slope = np.where((kind == _LINEAR)[:, None], (P1 - P0) / np.maximum(span, 1)[:, None] * 1e9, 0.0)
-            v_final[no_v] = slope[no_v]
+            if no_v.any():
+                slope = np.where((kind == _LINEAR)[:, None], (P1 - P0) / np.maximum(span, 1)[:, None] * 1e9, 0.0)
+                v_final[no_v] = slope[no_v]
         velocities[final_event] = v_final
+        sleeps = np.full(E, self.step_sleep_ns, dtype=np.int64)
         sleeps[final_event] = np.where(interp, rem_after, span)
         times_ns = np.cumsum(sleeps)
         times = times_ns / 1e9
@@ -298,6 +279,48 @@ class IndustrialSimulator:
             times_ns=times_ns,
             events=tuple(events),
         )
+
+    @staticmethod
+    def _hermite_rows(
+        kind: np.ndarray,
+        span: np.ndarray,
+        P0: np.ndarray,
+        P1: np.ndarray,
+        V0: np.ndarray,
+        V1: np.ndarray,
+        seg_of_event: np.ndarray,
+        ct_event: np.ndarray,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        seed: bool,
+    ) -> None:
+        """``accelerate()`` on every row of Hermite segments (rows of other segments are overwritten later)."""
+        dt = to_sec(span) if seed else span / 1e9
+        dt = np.where(kind == _HERMITE, dt, 1.0)
+        dt2 = py_pow(dt, 2)[:, None] if seed else (dt * dt)[:, None]
+        dt3 = py_pow(dt, 3)[:, None] if seed else (dt * dt * dt)[:, None]
+        dtc = dt[:, None]
+        herm = (kind == _HERMITE)[:, None]
+        x0 = P0
+        v0 = np.where(herm, V0, 0.0)
+        v1 = np.where(herm, V1, 0.0)
+        delta_x = P1 - x0
+        dv = v1 + v0
+        a1 = 6 * delta_x / dt2 - 2 * (dv + v0) / dtc
+        a2 = -12 * delta_x / dt3 + 6 * dv / dt2
+        if seed:  # the seed's expression order, CPython pow: bit for bit
+            c = ct_event[:, None]
+            c2 = py_pow(ct_event, 2)[:, None]
+            c3 = py_pow(ct_event, 3)[:, None]
+            x0r, v0r, a1r, a2r = x0[seg_of_event], v0[seg_of_event], a1[seg_of_event], a2[seg_of_event]
+            np.add(x0r + v0r * c + a1r * c2 / 2, a2r * c3 / 6, out=positions)
+            np.add(v0r + a1r * c, a2r * c2 / 2, out=velocities)
+        else:  # Horner form
+            c = ct_event[:, None]
+            h1, h2 = (a1 / 2)[seg_of_event], (a2 / 6)[seg_of_event]
+            v0r = v0[seg_of_event]
+            np.add(x0[seg_of_event], c * (v0r + c * (h1 + c * h2)), out=positions)
+            np.add(v0r, c * (2 * h1 + c * (3 * h2)), out=velocities)
 
     def _exact_grid(
         self, span: np.ndarray, steps: np.ndarray, redo: np.ndarray, ct: np.ndarray, seg_of_row: np.ndarray
