@@ -184,7 +184,8 @@ class Report:
             t = self.timing
             lines.append(
                 f"timing: expected {t.expected_period * 1e3:.3f} ms, periods {t.min_period * 1e3:.3f}.."
-                f"{t.max_period * 1e3:.3f} ms (mean {t.mean_period * 1e3:.3f}), RMS jitter {t.jitter_rms * 1e3:.3f} ms, "
+                f"{t.max_period * 1e3:.3f} ms (mean {t.mean_period * 1e3:.3f}), "
+                f"RMS jitter {t.jitter_rms * 1e3:.3f} ms, "
                 f"gaps {t.gaps}, repeated {t.repeated}: " + ("ok" if t.passed else "FAIL: " + "; ".join(t.failures))
             )
         if self.dropped_waypoints:
@@ -387,15 +388,17 @@ def check(
         keep = np.append(np.diff(t) > 0.25 * period, True)
         t, q = t[keep], q[keep]
         v_rep = v_rep[keep]
-        if len(t) < 2:
-            raise InvalidInputError("subject", "a single distinct sample time", "samples at >= 2 distinct times")
+        if len(t) < 2:  # nothing moved in time (e.g. every waypoint dropped): hold the state one period
+            t = np.append(t, t[-1] + period)
+            q = np.vstack([q, q[-1:]])
+            v_rep = np.vstack([v_rep, np.zeros_like(v_rep[-1:])])
+            if a_rep is not None:
+                a_rep = np.vstack([a_rep[keep], np.zeros_like(a_rep[-1:])])
+                keep = np.ones(len(t), dtype=bool)
         h = np.diff(t)[:, None]
         v_fd = np.vstack([np.zeros((1, q.shape[1])), np.diff(q, axis=0) / h])
         v = np.where(np.isfinite(v_rep), v_rep, v_fd)
-        if a_rep is not None:
-            a = a_rep[keep]
-        else:
-            a = np.vstack([np.zeros((1, q.shape[1])), np.diff(v, axis=0) / h])
+        a = a_rep[keep] if a_rep is not None else np.vstack([np.zeros((1, q.shape[1])), np.diff(v, axis=0) / h])
         j = np.vstack([np.zeros((1, q.shape[1])), np.diff(a, axis=0) / h])
         v_peak = np.maximum(np.abs(v).max(axis=0), np.abs(v_fd).max(axis=0))
         dv_all = np.abs(np.diff(v, axis=0))
