@@ -21,20 +21,20 @@ def _polymul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def compose_quadratic(cubic: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """Coefficients of ``q(sigma(tau))`` for cubic pieces and quadratic ``sigma``.
+    """Coefficients of ``q(sigma(tau))`` for cubic pieces ``q`` and a polynomial ``sigma`` (quadratic, cubic, ...).
 
     Args:
         cubic: Shape (m, 4, n): ``q(x) = sum_k cubic[:, k] x**k``.
-        sigma: Shape (m, 3): ``x = sigma0 + sigma1 tau + sigma2 tau**2``.
+        sigma: Shape (m, p+1): ``x = sum_i sigma[:, i] tau**i``.
 
     Returns:
-        Shape (m, 7, n): ascending powers of ``tau``.
+        Shape (m, 3p+1, n): ascending powers of ``tau`` (7 for a quadratic ``sigma``).
     """
     m, _, n = cubic.shape
     powers = [np.ones((m, 1))]
     for _ in range(3):
         powers.append(_polymul(powers[-1], sigma))
-    out = np.zeros((m, 7, n))
+    out = np.zeros((m, powers[-1].shape[1], n))
     for k, pk in enumerate(powers):
         out[:, : pk.shape[1], :] += pk[:, :, None] * cubic[:, k : k + 1, :]
     return out

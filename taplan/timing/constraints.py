@@ -34,13 +34,22 @@ class SegmentLimitConstraint(LinearConstraint):
         velocity: Maximum |joint velocity| [rad]/[s], shape (n,).
         acceleration: Maximum |joint acceleration| [rad]/[s]², shape (n,).
         fractions: Interior points of each segment where the limits are imposed as well, in (0, 1).
+        scale: Per-gridpoint factor in (0, 1] applied to both limits on the segment that starts there, shape (M+1,),
+            or None. Used to tighten the limits locally and re-solve.
     """
 
-    def __init__(self, velocity: np.ndarray, acceleration: np.ndarray, fractions: Sequence[float] = (0.5,)) -> None:
+    def __init__(
+        self,
+        velocity: np.ndarray,
+        acceleration: np.ndarray,
+        fractions: Sequence[float] = (0.5,),
+        scale: np.ndarray | None = None,
+    ) -> None:
         super().__init__()
         self.velocity = np.asarray(velocity, dtype=float)
         self.acceleration = np.asarray(acceleration, dtype=float)
         self.fractions = np.asarray(fractions, dtype=float)
+        self.scale = None if scale is None else np.asarray(scale, dtype=float)
         self.dof = self.velocity.shape[0]
         self.identical = True
         self.discretization_type = DiscretizationType.Collocation  # rows already cover the whole segment
@@ -62,6 +71,9 @@ class SegmentLimitConstraint(LinearConstraint):
         x_max = np.min((self.velocity / tangent) ** 2, axis=2)  # (count, interior)
         a_vel = 2.0 * offset[:, 1:-1] / x_max
         b_vel = 1.0 / x_max
+        if self.scale is not None:  # rows / scale <= limit  <=>  rows <= scale * limit
+            a_acc, b_acc = a_acc / self.scale[:, None], b_acc / self.scale[:, None]
+            a_vel, b_vel = a_vel / self.scale[:, None] ** 2, b_vel / self.scale[:, None] ** 2
         a = np.hstack([a_acc, a_vel])
         b = np.hstack([b_acc, b_vel])
         rows = m * n
@@ -70,4 +82,38 @@ class SegmentLimitConstraint(LinearConstraint):
         F[rows : 2 * rows, :rows] = -np.eye(rows)
         F[2 * rows :, rows:] = np.eye(interior)
         g = np.concatenate([np.tile(self.acceleration, m), np.tile(self.acceleration, m), np.ones(interior)])
-        return a, b, np.zeros_like(a), F, g, None, None
+        x_grid = np.min((self.velocity / np.maximum(np.abs(d1[:, 0]), _TINY_TANGENT)) ** 2, axis=1)
+        if self.scale is not None:
+            x_grid = x_grid * self.scale**2
+        xbound = np.column_stack([np.zeros(count), x_grid])
+        return a, b, np.zeros_like(a), F, g, None, xbound
+
+
+class PathJerkSpeedConstraint(LinearConstraint):
+    """Path-speed bound from the path's third derivative: ``|q'''_j(s)| ṡ³ <= fraction · jerk_j``.
+
+    The joint jerk along a path is ``q' s⃛ + 3 q'' ṡ s̈ + q''' ṡ³``; the last term depends on the speed only, so it is
+    bounded before any jerk-limiting of the timing. For the cubic spline ``q'''`` is constant on each waypoint
+    interval, so the bound (on ``x = ṡ²``) is imposed at every gridpoint with the larger of its two sides.
+
+    Args:
+        jerk: Maximum |joint jerk| [rad]/[s]³, shape (n,).
+        fraction: Share of the jerk limit the speed may use, in (0, 1].
+    """
+
+    def __init__(self, jerk: np.ndarray, fraction: float) -> None:
+        super().__init__()
+        self.jerk = np.asarray(jerk, dtype=float)
+        self.fraction = float(fraction)
+        self.dof = self.jerk.shape[0]
+        self.discretization_type = DiscretizationType.Collocation
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):  # noqa: ANN001, ANN201 (toppra API)
+        grid = np.asarray(gridpoints, dtype=float)
+        eps = 1e-9 * max(1.0, float(grid[-1] - grid[0]))
+        left = np.abs(np.asarray(path(np.maximum(grid - eps, grid[0]), 3)))
+        right = np.abs(np.asarray(path(np.minimum(grid + eps, grid[-1]), 3)))
+        third = np.maximum(np.maximum(left, right), _TINY_TANGENT)
+        x_max = np.min((self.fraction * self.jerk / third) ** (2.0 / 3.0), axis=1)
+        xbound = np.column_stack([np.zeros_like(x_max), x_max])
+        return None, None, None, None, None, None, xbound

@@ -37,7 +37,7 @@ from taplan._validation import as_vector
 from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.timing._polynomial import compose_quadratic, max_abs_derivative, time_scaled
-from taplan.timing.constraints import SegmentLimitConstraint
+from taplan.timing.constraints import PathJerkSpeedConstraint, SegmentLimitConstraint
 from taplan.timing.path import Path
 from taplan.trajectory import Trajectory
 
@@ -131,6 +131,11 @@ def _path_speed(path: Path, s: float, velocity: np.ndarray | None, name: str) ->
     return speed
 
 
+def grid_for(path: Path, points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT) -> np.ndarray:
+    """The TOPP-RA gridpoints taplan uses for ``path``: every waypoint, each interval split uniformly."""
+    return _grid(path, points_per_segment)
+
+
 def _grid(path: Path, points_per_segment: int) -> np.ndarray:
     ss = path.ss_waypoints
     k = max(int(points_per_segment), int(np.ceil(MIN_GRID_SEGMENTS / (len(ss) - 1))))
@@ -147,6 +152,9 @@ def time_optimal_profile(
     sd_end: float = 0.0,
     *,
     points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT,
+    jerk: np.ndarray | None = None,
+    jerk_fraction: float = 0.5,
+    limit_scale: np.ndarray | None = None,
 ) -> PathProfile:
     """Solve TOPP-RA with toppra on taplan's grid and integrate the result exactly.
 
@@ -157,15 +165,19 @@ def time_optimal_profile(
         sd_start: Path speed at the start [1/s].
         sd_end: Path speed at the end [1/s].
         points_per_segment: Grid segments per waypoint interval.
+        jerk: Maximum |jerk| [rad]/[s]^3, shape (n,), or None. When given, the path speed is bounded so that the
+            speed-only jerk term ``q'''(s) sd^3`` uses at most ``jerk_fraction`` of it.
+        jerk_fraction: See ``jerk``.
+        limit_scale: Per-gridpoint factor in (0, 1] on the velocity and acceleration limits, shape (M+1,) for the
+            grid :func:`grid_for` returns, or None.
 
     Raises:
         TimingError: toppra found no parameterisation; the message says why.
     """
     grid = _grid(path, points_per_segment)
-    constraints = [
-        toppra.constraint.JointVelocityConstraint(velocity),
-        SegmentLimitConstraint(velocity, acceleration),
-    ]
+    constraints = [SegmentLimitConstraint(velocity, acceleration, scale=limit_scale)]
+    if jerk is not None:
+        constraints.append(PathJerkSpeedConstraint(jerk, jerk_fraction))
     level = _toppra_logger.level
     _toppra_logger.setLevel(logging.ERROR)
     try:
