@@ -1,0 +1,57 @@
+"""Check a trajectory file against the joint limits and for smoothness; exit 1 when it fails.
+
+``taplan check plan.json`` evaluates the plan itself; ``--controller seed|intended|jtc|jtc-none|joint-position|
+joint-velocity`` checks what that controller would do with it instead. Joints are matched by name to the robot
+(default the bundled TeleAvatar); ``--limits planning`` uses the planner's scaled limits instead of the hardware
+ceilings. Prints the report, writes a PNG of q, q̇, q̈ and jerk, and optionally the report as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from taplan.check import Thresholds, check
+from taplan.commands.replay import add_controller_arguments, replay_with
+from taplan.trajectory import Trajectory
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", type=Path, help="trajectory or waypoint file (.csv, .json, .npz)")
+    add_controller_arguments(parser, "trajectory")
+    parser.add_argument("--limits", choices=("hardware", "planning"), default="hardware", help="limit set (hardware)")
+    parser.add_argument("--source", choices=("updates", "samples"), default="updates", help="replay stream to check")
+    parser.add_argument("--rate", type=float, default=None, help="evaluation rate of a trajectory [Hz] (1000)")
+    parser.add_argument("--no-jerk", action="store_true", help="report jerk without failing on it")
+    parser.add_argument("--png", type=Path, default=None, help="plot file (default <file>_check.png)")
+    parser.add_argument("--no-png", action="store_true", help="do not write a plot")
+    parser.add_argument("--json", type=Path, default=None, help="also write the report as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from taplan.robot import Robot
+
+    trajectory = Trajectory.load(args.file)
+    robot = Robot.teleavatar()
+    all_limits = robot.limits if args.limits == "hardware" else robot.planning_limits
+    limits = all_limits.subset(trajectory.joint_names)
+    thresholds = Thresholds(check_jerk=not args.no_jerk)
+    if args.controller == "trajectory":
+        subject = trajectory
+        report = check(trajectory, limits, rate=args.rate, thresholds=thresholds, name=str(args.file))
+    else:
+        subject = replay_with(trajectory, args, all_limits)
+        report = check(
+            subject, limits, thresholds=thresholds, source=args.source, name=f"{args.file} via {subject.controller}"
+        )
+    print(report.table())
+    if not args.no_png:
+        from taplan.plots import save_profiles
+
+        png = args.png or args.file.with_name(f"{args.file.stem}_check.png")
+        save_profiles(subject, png, limits)
+        print(f"wrote {png}")
+    if args.json is not None:
+        args.json.write_text(report.to_json())
+        print(f"wrote {args.json}")
+    return 0 if report.passed else 1
