@@ -1,0 +1,191 @@
+"""taplan.timing: retime (TOPP-RA) limits, boundary conditions, analytic cases, jerk-limited, sync, bad inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.errors import InvalidInputError, TimingError
+from taplan.timing import Path, jerk_limited, limit_usage, retime, sampled_limit_usage, synchronise
+
+LIMIT_TOL = 1e-6  # relative: sampled |qd|/v and |qdd|/a must stay <= 1 + LIMIT_TOL
+POS_TOL = 1e-9  # [rad]
+VEL_TOL = 1e-6  # [rad]/[s]
+ACC_TOL = 1e-6  # [rad]/[s]^2
+DURATION_RTOL = 2e-3  # relative, analytic bang-bang durations
+JERK_DURATION_RATIO = 1.15  # jerk-limited duration / TOPP-RA duration
+
+
+@pytest.fixture(scope="module")
+def arm_limits(teleavatar: taplan.Robot) -> taplan.JointLimits:
+    return teleavatar.planning_limits.subset(teleavatar.group("left").joint_names)
+
+
+def random_walk(limits: taplan.JointLimits, count: int, seed: int, step: float = 0.4) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    mid, half = (limits.lower + limits.upper) / 2, (limits.upper - limits.lower) / 2
+    q = [mid + rng.uniform(-0.5, 0.5, limits.size) * half]
+    for _ in range(count - 1):
+        q.append(np.clip(q[-1] + rng.uniform(-step, step, limits.size), mid - 0.75 * half, mid + 0.75 * half))
+    return np.array(q)
+
+
+def single_joint_limits(velocity: float, acceleration: float) -> taplan.JointLimits:
+    return taplan.JointLimits.from_arrays(["j"], [-10.0], [10.0], [velocity], [acceleration])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_retime_never_exceeds_limits_on_random_paths(arm_limits: taplan.JointLimits, seed: int) -> None:
+    traj = retime(random_walk(arm_limits, 8, seed), arm_limits)
+    sampled = sampled_limit_usage(traj, arm_limits, rate=1000.0)
+    exact = limit_usage(traj, arm_limits)
+    assert sampled.max_velocity <= 1 + LIMIT_TOL
+    assert sampled.max_acceleration <= 1 + LIMIT_TOL
+    assert exact.within(LIMIT_TOL)
+    assert exact.max_acceleration > 0.99  # time-optimal: some joint uses its acceleration limit
+
+
+def test_retime_velocity_limited_path_holds_limits(arm_limits: taplan.JointLimits) -> None:
+    slow = arm_limits.replace(velocity=arm_limits.velocity * 0.05)
+    traj = retime(random_walk(arm_limits, 6, 7), slow)
+    usage = sampled_limit_usage(traj, slow)
+    assert usage.within(LIMIT_TOL)
+    assert usage.max_velocity > 0.99
+
+
+def test_retime_passes_through_waypoints_and_rests_at_ends(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 5, 3)
+    traj = retime(q, arm_limits)
+    for row in q:
+        assert np.min(np.max(np.abs(traj.positions - row), axis=1)) <= POS_TOL
+    np.testing.assert_allclose(traj(0.0), q[0], atol=POS_TOL)
+    np.testing.assert_allclose(traj(traj.duration), q[-1], atol=POS_TOL)
+    np.testing.assert_allclose(traj(0.0, 1), 0.0, atol=VEL_TOL)
+    np.testing.assert_allclose(traj(traj.duration, 1), 0.0, atol=VEL_TOL)
+    assert traj.joint_names == arm_limits.names
+
+
+@pytest.mark.parametrize(
+    ("distance", "velocity", "acceleration"),
+    [(1.0, 2.0, 3.0), (3.0, 1.0, 4.0)],  # triangular (never reaches v), trapezoidal
+)
+def test_single_joint_rest_to_rest_is_bang_bang(distance: float, velocity: float, acceleration: float) -> None:
+    limits = single_joint_limits(velocity, acceleration)
+    traj = retime([[0.0], [distance]], limits)
+    if distance >= velocity**2 / acceleration:
+        expected = distance / velocity + velocity / acceleration
+    else:
+        expected = 2 * np.sqrt(distance / acceleration)
+    np.testing.assert_allclose(traj.duration, expected, rtol=DURATION_RTOL)
+    assert sampled_limit_usage(traj, limits).within(LIMIT_TOL)
+
+
+def test_retime_non_zero_boundary_velocities(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 4, 5)
+    d0, d1 = q[1] - q[0], q[-1] - q[-2]
+    v0 = 0.1 * d0 / np.max(np.abs(d0) / arm_limits.velocity)  # along the first chord, 10 % of the tightest limit
+    v1 = 0.05 * d1 / np.max(np.abs(d1) / arm_limits.velocity)
+    traj = retime(q, arm_limits, start_velocity=v0, end_velocity=v1)
+    np.testing.assert_allclose(traj(0.0, 1), v0, atol=1e-6 * np.max(np.abs(v0)) + VEL_TOL)
+    np.testing.assert_allclose(traj(traj.duration, 1), v1, atol=1e-6 * np.max(np.abs(v1)) + VEL_TOL)
+    assert sampled_limit_usage(traj, arm_limits).within(LIMIT_TOL)
+
+
+def test_retime_accepts_path_and_checks_tangency(arm_limits: taplan.JointLimits) -> None:
+    path = Path(random_walk(arm_limits, 4, 6))
+    tangent = path(0.0, 1)
+    traj = retime(path, arm_limits, start_velocity=0.01 * tangent)
+    np.testing.assert_allclose(traj(0.0, 1), 0.01 * tangent, atol=VEL_TOL)
+    with pytest.raises(InvalidInputError, match="start_velocity"):
+        retime(path, arm_limits, start_velocity=np.roll(0.01 * tangent, 1) + 0.01)
+
+
+def test_retime_save_load_round_trip(arm_limits: taplan.JointLimits, tmp_path) -> None:  # noqa: ANN001
+    traj = retime(random_walk(arm_limits, 4, 8), arm_limits)
+    t = traj.sample_times(1000.0)
+    for suffix in (".json", ".npz"):
+        loaded = taplan.trajectory.Trajectory.load(traj.save(tmp_path / f"traj{suffix}"))
+        np.testing.assert_allclose(loaded(t, 2), traj(t, 2), atol=ACC_TOL)
+        assert loaded.interpolation == "polynomial"
+
+
+@pytest.mark.parametrize(
+    ("waypoints", "match"),
+    [
+        ([[0.0] * 7, [np.nan] * 7], "finite"),
+        ([[0.0] * 7], "at least 2"),
+        ([[0.0] * 7, [0.1] * 7, [0.1] * 7], "equal"),
+        ([[0.0] * 6, [0.1] * 6], "shape"),
+        ([0.0, 0.1], "shape"),
+    ],
+)
+def test_retime_rejects_bad_waypoints(arm_limits: taplan.JointLimits, waypoints: list, match: str) -> None:
+    with pytest.raises(InvalidInputError, match=match):
+        retime(waypoints, arm_limits)
+
+
+def test_retime_rejects_bad_limits_and_velocities(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 3, 9)
+    with pytest.raises(InvalidInputError, match="limits"):
+        retime(q, {"velocity": 1.0})  # type: ignore[arg-type]
+    with pytest.raises(TimingError, match="exceeds the velocity limit"):
+        retime(q, arm_limits, start_velocity=2 * arm_limits.velocity)
+    with pytest.raises(InvalidInputError, match="start_velocity"):
+        retime(q, arm_limits, start_velocity=[0.1] * 6)
+
+
+def test_retime_rejects_path_outside_position_limits(arm_limits: taplan.JointLimits) -> None:
+    q = np.array([arm_limits.lower + 0.1, arm_limits.upper + 0.05])
+    with pytest.raises(TimingError, match="position limits"):
+        retime(q, arm_limits)
+
+
+def test_retime_infeasible_end_velocity_raises(arm_limits: taplan.JointLimits) -> None:
+    q = np.array([arm_limits.lower + 0.5, arm_limits.lower + 0.5001])
+    v1 = np.sign(q[1] - q[0]) * 0.999 * arm_limits.velocity * 0  # zero end velocity keeps it feasible
+    traj = retime(q, arm_limits, end_velocity=v1)
+    assert traj.duration > 0
+    v_big = (q[1] - q[0]) / np.max(np.abs(q[1] - q[0]) / arm_limits.velocity) * 0.999
+    with pytest.raises(TimingError, match="TOPP-RA failed"):
+        retime(q, arm_limits, start_velocity=v_big)  # cannot stop within 1e-4 rad
+
+
+def test_jerk_limited_holds_all_limits_and_is_near_optimal(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 6, 11)
+    result = jerk_limited(q, arm_limits)
+    traj = result.trajectory
+    usage = sampled_limit_usage(traj, arm_limits)
+    assert usage.within(LIMIT_TOL, jerk=True)
+    assert limit_usage(traj, arm_limits).within(LIMIT_TOL, jerk=True)
+    np.testing.assert_allclose(traj(0.0, 2), 0.0, atol=ACC_TOL)
+    np.testing.assert_allclose(traj(traj.duration, 2), 0.0, atol=ACC_TOL)
+    np.testing.assert_allclose(traj(traj.duration, 1), 0.0, atol=VEL_TOL)
+    inner = traj.times[1:-1]
+    left = traj(inner - 1e-9, 2)
+    right = traj(inner + 1e-9, 2)
+    assert np.max(np.abs(left - right)) < 1e-5  # continuous acceleration [rad]/[s]^2
+    assert result.duration_ratio <= JERK_DURATION_RATIO
+    for row in q:
+        assert np.min(np.max(np.abs(traj(np.linspace(0, traj.duration, 20001)) - row), axis=1)) < 1e-3
+
+
+def test_synchronise_together_and_independent(teleavatar: taplan.Robot) -> None:
+    limits = {g: teleavatar.planning_limits.subset(teleavatar.group(g).joint_names) for g in ("left", "right")}
+    home = teleavatar.home
+    wp = {
+        "left": np.array([home[:7], home[:7] + 0.3, home[:7] + 0.1]),
+        "right": np.array([home[7:], home[7:] - 0.1, home[7:] + 0.05]),
+    }
+    together = synchronise(wp, limits, mode="together")
+    assert together["left"].duration == together["right"].duration
+    np.testing.assert_array_equal(together["left"].times, together["right"].times)
+    for g, traj in together.items():
+        assert traj.joint_names == limits[g].names
+        assert sampled_limit_usage(traj, limits[g]).within(LIMIT_TOL)
+    independent = synchronise(wp, limits, mode="independent")
+    assert independent["right"].duration < together["right"].duration
+    with pytest.raises(InvalidInputError, match="mode"):
+        synchronise(wp, limits, mode="sometimes")
+    with pytest.raises(InvalidInputError, match="same number"):
+        synchronise({"left": wp["left"], "right": wp["right"][:2]}, limits)
