@@ -196,10 +196,14 @@ class ProblemBuilder:
         upper.fill(np.inf)
         layers = self.problem.layers
         layers.clear()
+        scale = 1.0
         for lim in self.box_limits:
             lo, hi = lim.bounds(ctx)
             intersect_relaxed(lower, upper, lo, hi, self._scratch)
             layers.append((lim.name, lo, hi))
+            scale *= lim.objective_scale
+        if scale != 1.0:
+            c *= scale
         k = 0
         for lim in self.row_limits:
             k += lim.rows(ctx, self._G[k:], self._h[k:])

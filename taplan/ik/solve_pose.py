@@ -59,6 +59,7 @@ def solve_pose(
     collision: bool = False,
     solver: str | QPSolver = "proxqp",
     seed: int = 0,
+    lm_damping: float = 1e-3,
 ) -> IKResult:
     """Find a configuration that puts each frame at its target pose.
 
@@ -80,6 +81,7 @@ def solve_pose(
         collision: Keep the arms' capsules apart (dual-arm robots).
         solver: QP backend.
         seed: Seed of the restarts' random configurations.
+        lm_damping: Levenberg-Marquardt damping per squared error ([m²] + [rad²]).
 
     Returns:
         The result; ``success`` is True only if every error is within ``tolerance``.
@@ -143,7 +145,7 @@ def solve_pose(
             if stall >= 5:
                 break
             previous = cost
-            builder.damping = 1e-9 + 1e-3 * cost**2  # Levenberg-Marquardt: damp far from the solution
+            builder.damping = 1e-9 + lm_damping * _squared_error(kin, tasks)  # Levenberg-Marquardt
             problem = builder.build(q, 1.0)
             v = project(problem, backend.solve(problem))
             q = q + v
@@ -170,3 +172,7 @@ def _errors(
         pos[task.name], rot[task.name] = p, r
         cost += (p / tol_p) ** 2 + (r / tol_r) ** 2
     return pos, rot, float(np.sqrt(cost))
+
+
+def _squared_error(kin: Kinematics, tasks: list[FrameTask]) -> float:
+    return float(sum(np.dot(e, e) for e in (t.compute_error(kin) for t in tasks)))

@@ -74,13 +74,8 @@ class _ProxQPWorkspace:
         from proxsuite import proxqp
 
         self.n, self.m = n, m
-        self.qp = proxqp.dense.QP(n + m, 0, m, True)
-        s = self.qp.settings
-        s.eps_abs = eps_abs
-        s.eps_rel = 0.0
-        s.max_iter = max_iter
-        s.compute_timings = False
-        s.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        self.eps_abs, self.max_iter = eps_abs, max_iter
+        self.qp = self._new_qp()
         self.solved = proxqp.QPSolverOutput.PROXQP_SOLVED
         self.H = np.zeros((n + m, n + m))
         self.g = np.zeros(n + m)
@@ -92,6 +87,18 @@ class _ProxQPWorkspace:
         if m:
             self.C[:, n:] = -np.eye(m)
         self.initialised = False
+
+    def _new_qp(self) -> Any:
+        from proxsuite import proxqp
+
+        qp = proxqp.dense.QP(self.n + self.m, 0, self.m, True)
+        s = qp.settings
+        s.eps_abs = self.eps_abs
+        s.eps_rel = 0.0
+        s.max_iter = self.max_iter
+        s.compute_timings = False
+        s.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        return qp
 
     def solve(self, problem: Problem) -> np.ndarray:
         n, m = self.n, self.m
@@ -116,9 +123,14 @@ class _ProxQPWorkspace:
             self.initialised = True
         qp.solve()
         results = qp.results
-        if results.info.status != self.solved:
-            self.initialised = False  # next call starts cold
-            raise SolverError(f"proxqp failed: {results.info.status}", problem.copy())
+        if results.info.status != self.solved:  # a stale warm start can mislead it: retry once from scratch
+            self.qp = qp = self._new_qp()
+            qp.init(H, g, None, None, C, low, u, lo, hi)
+            qp.solve()
+            results = qp.results
+            if results.info.status != self.solved:
+                self.initialised = False
+                raise SolverError(f"proxqp failed: {results.info.status}", problem.copy())
         self.out[:] = results.x[:n]
         self.iterations = int(results.info.iter)
         return self.out

@@ -67,6 +67,11 @@ class TargetBraking(BoxLimit):
     acceleration-limited step keeps accelerating until the remaining error is below ``v dt`` and then overshoots by
     up to ``v² / (2a)``. Moving away from the target is not bounded here. Lowest priority: relaxed first.
 
+    The joints are also coordinated: the objective's linear term is scaled by
+    ``κ = min(1, min_j bound_j / |v_free_j|)`` (``objective_scale``), so its unconstrained minimiser becomes
+    ``κ v_free``, the Gauss-Newton direction at the largest speed from which every joint can still stop at the
+    target. Without this, joints braking independently bend the path and the frame overshoots in task space.
+
     Args:
         acceleration: Braking deceleration [rad/s²], shape (nv,).
     """
@@ -85,6 +90,8 @@ class TargetBraking(BoxLimit):
         self._upper = np.empty(n)
         self._bound = np.empty(n)
         self._mask = np.empty(n, dtype=bool)
+        self._speed = np.empty(n)
+        self.objective_scale = 1.0
         self._dt = -1.0
 
     def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
@@ -100,6 +107,11 @@ class TargetBraking(BoxLimit):
         bound += self._adt2
         np.sqrt(bound, out=bound)
         bound -= self._adt
+        speed = self._speed
+        np.abs(ctx.v_free, out=speed)
+        speed += 1e-12  # [rad/s]: joints the target does not move get ratio 1, not 0/0
+        np.divide(bound + 1e-12, speed, out=speed)
+        self.objective_scale = min(1.0, float(speed.min()))
         np.less(ctx.v_free, 0.0, out=self._mask)  # moving down: no upper bound from braking
         np.copyto(self._upper, bound)
         self._upper[self._mask] = np.inf

@@ -74,6 +74,8 @@ class CollisionLimit(RowLimit):
         influence: Distance below which a pair is constrained [m], > margin.
         gain: Fraction ``γ`` of the gap a step may close, in (0, 1].
         acceleration: Joint acceleration limits [rad/s²] (nv,), or None (no braking term).
+        buffer: Extra distance [m] added to the margin inside the constraint, absorbing the first-order
+            (linearisation) error of one step so the true distance stays above ``margin``.
     """
 
     name = "collision"
@@ -86,6 +88,7 @@ class CollisionLimit(RowLimit):
         influence: float = 0.10,
         gain: float = 0.5,
         acceleration: np.ndarray | None = None,
+        buffer: float = 1e-3,
     ) -> None:
         if not (np.isfinite(margin) and margin >= 0.0):
             raise InvalidInputError("margin", margin, "a distance >= 0 [m]")
@@ -95,12 +98,14 @@ class CollisionLimit(RowLimit):
             raise InvalidInputError("gain", gain, "a number in (0, 1]")
         self.pairs = list(pairs)
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
+        self.buffer = float(buffer)
         self.acceleration = None if acceleration is None else np.asarray(acceleration, dtype=float)
         self.max_rows = len(self.pairs)
         self.reach = _reach_bound(model, self.pairs)
         self._q_eval = np.full(model.nv, np.nan)
         self._clearance = -np.inf
         self._min_distance = np.inf
+        self._alpha_min = 1.0  # [m/s²], refreshed at each exact evaluation
         self._scratch = np.empty(model.nv)
         self.distances = np.full(len(self.pairs), np.inf)
 
@@ -118,28 +123,41 @@ class CollisionLimit(RowLimit):
         if not self.pairs:
             return 0
         q = ctx.kin.q
+        dt = ctx.dt
         s = self._scratch
         np.subtract(q, self._q_eval, out=s)
         np.abs(s, out=s)
         travel = self.reach * float(s.sum())
-        if travel < self._clearance:  # nan-safe: a nan travel fails the test and forces an evaluation
+        horizon = 0.0
+        if self.acceleration is not None:  # distance the arms may need to brake from their current speed
+            np.abs(ctx.v_prev, out=s)
+            speed = self.reach * float(s.sum())
+            horizon = 1.5 * speed * speed / (2.0 * self._alpha_min) + 2.0 * speed * dt
+        if travel + horizon < self._clearance:  # nan-safe: nan fails the test and forces an evaluation
             self._min_distance = self._clearance + self.influence - travel
             return 0
         k = 0
-        dt = ctx.dt
+        alpha_min = np.inf
         for i, (first, second) in enumerate(self.pairs):
             d, grad, _, _ = capsule_pair_distance(ctx.kin, first, second)
             self.distances[i] = d
-            if d >= self.influence:
-                continue
-            gap = d - self.margin
+            gap = d - self.margin - self.buffer
             rate = self.gain * gap / dt
-            if self.acceleration is not None and gap > 0.0:
+            active = d < self.influence
+            if self.acceleration is not None:
                 alpha = 0.5 * float(np.abs(grad) @ self.acceleration)
-                rate = min(rate, float(np.sqrt(2.0 * alpha * gap)))
+                alpha_min = min(alpha_min, alpha)
+                approach = max(0.0, -float(grad @ ctx.v_prev))
+                active = active or gap < 1.5 * approach * approach / (2.0 * alpha) + 2.0 * approach * dt
+                if gap > 0.0:
+                    rate = min(rate, float(np.sqrt(2.0 * alpha * gap)))
+            if not active:
+                continue
             np.negative(grad, out=G[k])
             h[k] = rate
             k += 1
+        if np.isfinite(alpha_min) and alpha_min > 0.0:
+            self._alpha_min = alpha_min
         self._q_eval[:] = q
         d_min = float(self.distances.min())
         self._clearance = d_min - self.influence

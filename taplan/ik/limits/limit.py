@@ -53,11 +53,13 @@ class BoxLimit(abc.ABC):
         name: Short name, used in ``Problem.relaxations``.
         priority: Lower is harder; see the module docstring for the order.
         needs_free_velocity: Whether ``bounds`` reads ``ctx.v_free``.
+        objective_scale: Factor in (0, 1] for the objective's linear term, set by ``bounds`` (1 by default).
     """
 
     name: str = "limit"
     priority: int = 50
     needs_free_velocity: bool = False
+    objective_scale: float = 1.0  # factor the builder applies to the linear term after ``bounds``
 
     @abc.abstractmethod
     def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
