@@ -7,7 +7,7 @@ and two smoothness indices from the literature:
 * **SPARC**, the spectral arc length of the velocity profile (Balasubramanian, Melendez-Calderon, Roby-Brami and
   Burdet, "On the analysis of movement smoothness", J. NeuroEng. Rehabil. 12:112, 2015): the negative arc length of
   the normalised Fourier magnitude spectrum up to an adaptive cut-off (10 Hz, amplitude threshold 0.05, zero
-  padding 4). Closer to 0 is smoother (about -1.6 for a minimum-jerk reach); NaN for a joint that does not move.
+  padding 4). Closer to 0 is smoother (-1.40 for a minimum-jerk reach); NaN for a joint that does not move.
 * **LDLJ**, the log dimensionless jerk of the velocity profile (Hogan and Sternad, 2009; same paper):
   ``-ln(T³ / v_peak² ∫ j(t)² dt)`` with ``T`` the duration; -ln(204.8) = -5.32 for a minimum-jerk (quintic)
   reach; more negative is less smooth.
@@ -273,7 +273,8 @@ def ldlj(velocity: npt.ArrayLike, jerk: npt.ArrayLike, rate: float) -> float:
         rate: Sample rate [Hz].
 
     Returns:
-        LDLJ (more negative is less smooth), NaN for a zero profile, -inf for a jerk integral of zero.
+        LDLJ (more negative is less smooth), NaN for a zero profile, +inf for a jerk integral of zero (a
+        piecewise-linear plan evaluated analytically: its jerk is impulses at the knots, not sampled).
     """
     v = np.asarray(velocity, dtype=float)
     j = np.asarray(jerk, dtype=float)
@@ -368,7 +369,7 @@ def check(
         elif isinstance(subject, JointStateSamples):
             t, q, v_rep, a_rep = subject.times, subject.positions, subject.velocities, None
             stream_rate = subject.rate if rate is None else as_positive(rate, "rate")
-            names = tuple(f"joint{i}" for i in range(q.shape[1]))
+            names = subject.joint_names or tuple(f"joint{i}" for i in range(q.shape[1]))
             wp = np.zeros(0) if waypoint_times is None else _times(waypoint_times)
             label = name or "joint_states"
         else:

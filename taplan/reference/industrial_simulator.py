@@ -260,7 +260,7 @@ class IndustrialSimulator:
         times = times_ns / 1e9
 
         jumps = final_event[kind == _JUMP]
-        replay_samples = self._samples(times_ns, positions, velocities, q_init, hold)
+        replay_samples = self._samples(times_ns, positions, velocities, q_init, hold, w.joint_names)
         return Replay(
             controller=f"industrial_simulator[{self.mode}]",
             joint_names=w.joint_names,
@@ -356,6 +356,7 @@ class IndustrialSimulator:
         velocities: np.ndarray,
         q_init: np.ndarray,
         hold: float | None,
+        names: tuple[str, ...],
     ) -> JointStateSamples:
         period = self.pub_period_ns
         hold_ns = period if hold is None else int(duration_ns_scalar(float(hold)))
@@ -373,7 +374,7 @@ class IndustrialSimulator:
         if before.any():
             q[before] = q_init
             v[before] = 0.0
-        return JointStateSamples(pub_ns / 1e9, q, v, self.pub_rate, pub_ns)
+        return JointStateSamples(pub_ns / 1e9, q, v, self.pub_rate, pub_ns, names)
 
 
 def _last_offset(off: np.ndarray, first_row: np.ndarray, steps: np.ndarray) -> np.ndarray:

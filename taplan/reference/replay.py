@@ -32,6 +32,7 @@ class JointStateSamples:
         velocities: [rad]/[s], shape (k, n); NaN where the message's velocity list would be empty.
         rate: Nominal publish rate [Hz].
         times_ns: Publish times in integer nanoseconds, shape (k,), or None.
+        joint_names: n names, or None (``joint0..``).
     """
 
     times: np.ndarray
@@ -39,6 +40,7 @@ class JointStateSamples:
     velocities: np.ndarray
     rate: float
     times_ns: np.ndarray | None = None
+    joint_names: tuple[str, ...] | None = None
 
     def __len__(self) -> int:
         return int(self.times.shape[0])
