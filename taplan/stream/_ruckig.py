@@ -14,6 +14,8 @@ here, so the streamers never see ruckig's types. Pitfalls handled here:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import ruckig
 
@@ -90,24 +92,71 @@ class RuckigAdapter:
         """True when the new trajectory goes beyond the bounds set by :meth:`set_bounds`.
 
         ruckig's ``position_extrema`` misses an extremum inside a constant-acceleration segment (it looks for interior
-        extrema only where the jerk is non-zero), and omits the straight tail of joints that arrive early without
-        synchronisation. So three checks: the reported extrema (covering ruckig's braking pre-profile), the end
-        position, and ``get_first_time_at_position`` at each bound, which solves every segment's polynomial.
+        extrema only where the jerk is non-zero) and omits the straight tail of joints that arrive early without
+        synchronisation; ``get_first_time_at_position`` can report a crossing that does not exist near a triple root.
+        So: a fast screen (reported extrema, end position, first time at each bound), and every joint the screen
+        flags is confirmed on its profile with :func:`profile_range` (exact: every segment's turning points).
         """
         trajectory = self.out.trajectory
         lo, hi = self._lo, self._hi
+        suspects = set()
         for i, bound in enumerate(trajectory.position_extrema):
             if bound.min < lo[i] or bound.max > hi[i]:
-                return True
+                suspects.add(i)
         end = trajectory.at_time(trajectory.duration)[0]
         first_time = trajectory.get_first_time_at_position
         for i in range(self.n):
             if end[i] < lo[i] or end[i] > hi[i]:
-                return True
+                return True  # the end state is exact
             if first_time(i, lo[i]) is not None or first_time(i, hi[i]) is not None:
+                suspects.add(i)
+        if not suspects:
+            return False
+        profiles = trajectory.profiles[0]
+        for i in suspects:
+            low, high = profile_range(profiles[i])
+            if low < lo[i] or high > hi[i]:
                 return True
         return False
 
     def duration(self) -> float:
         """Duration of the current trajectory [s]."""
         return float(self.out.trajectory.duration)
+
+
+def _segments_range(
+    t: list[float], j: list[float], a: list[float], v: list[float], p: list[float]
+) -> tuple[float, float]:
+    """Exact position range of consecutive constant-jerk segments (durations ``t``; start states ``a, v, p``)."""
+    low = high = p[0]
+    for k in range(len(t)):
+        duration = t[k]
+        if duration <= 0.0:
+            continue
+        jk, ak, vk, pk = j[k], a[k], v[k], p[k]
+        end = pk + duration * (vk + duration * (ak / 2.0 + duration * jk / 6.0))
+        low, high = min(low, end), max(high, end)
+        # turning points: v + a tau + j tau^2 / 2 = 0 inside (0, duration)
+        if jk == 0.0:
+            roots = (-vk / ak,) if ak != 0.0 else ()
+        else:
+            disc = ak * ak - 2.0 * jk * vk
+            if disc < 0.0:
+                continue
+            root = math.sqrt(disc)
+            roots = ((-ak - root) / jk, (-ak + root) / jk)
+        for tau in roots:
+            if 0.0 < tau < duration:
+                x = pk + tau * (vk + tau * (ak / 2.0 + tau * jk / 6.0))
+                low, high = min(low, x), max(high, x)
+    return low, high
+
+
+def profile_range(profile: ruckig.Profile) -> tuple[float, float]:
+    """Exact (min, max) position [rad] over a ruckig profile, its braking pre-profile included."""
+    low, high = _segments_range(profile.t, profile.j, profile.a, profile.v, profile.p)
+    brake = profile.brake
+    if brake.duration > 0.0:
+        b_low, b_high = _segments_range(brake.t, brake.j, brake.a, brake.v, brake.p)
+        low, high = min(low, b_low), max(high, b_high)
+    return low, high

@@ -35,7 +35,7 @@ __all__ = ["JointStreamer", "POSITION_TOLERANCE"]
 
 logger = logging.getLogger(__name__)
 
-POSITION_TOLERANCE = 1e-8  # [rad]: numerical slack of ruckig's position accuracy; emitted positions are clipped to it
+POSITION_TOLERANCE = 1e-7  # [rad]: slack over ruckig's position accuracy (1e-8); emitted positions are clipped
 _SPEED_MARGIN = 1.0 - 1e-6  # keep admitted target speeds strictly inside the braking-room bound
 
 _POSITION, _BRAKE = 0, 1

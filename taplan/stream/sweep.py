@@ -29,7 +29,7 @@ from taplan.stream.state import StreamState
 __all__ = ["TargetEvent", "Scenario", "random_scenario", "run_scenario", "stream_violations", "StreamRecord"]
 
 LIMIT_TOL = 1e-9  # relative slack on velocity/acceleration/jerk checks (ruckig is exact to ~1e-12)
-CONTINUITY_TOL = 1e-9  # absolute slack on the continuity inequalities [rad], [rad]/[s], [rad]/[s]²
+CONTINUITY_TOL = 1e-7  # absolute slack on the continuity inequalities: the position clip to the bounds (<= 1e-7 [rad])
 
 
 @dataclass(frozen=True)
