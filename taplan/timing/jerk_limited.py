@@ -53,7 +53,8 @@ __all__ = ["jerk_limited", "JerkLimitedResult", "filter_profile"]
 
 DEFAULT_WIDTH_FACTORS = (1.5, 2.0, 2.5)  # x max_j(a_j / j_j)
 DEFAULT_JERK_FRACTION = 1.0  # share of the jerk limit left to the speed-only term q''' sd^3
-DEFAULT_REPAIRS = 3
+DEFAULT_REPAIRS = 5
+TIGHTEN_EXPONENT = 0.8  # partial step: limits scaled by 1 / ratio**0.8 per repair round (full steps over-tighten)
 _BISECTIONS = 60
 
 
@@ -262,5 +263,5 @@ def _tighten(scale: np.ndarray, grid_times: np.ndarray, times: np.ndarray, w: fl
     for k in np.flatnonzero(ratio > 1.0):
         lo = max(int(np.searchsorted(grid_times, times[k] - w)) - 1, 0)
         hi = min(int(np.searchsorted(grid_times, times[k + 1])) + 1, len(out))
-        out[lo:hi] = np.minimum(out[lo:hi], scale[lo:hi] / (ratio[k] * 1.01))
+        out[lo:hi] = np.minimum(out[lo:hi], scale[lo:hi] / ratio[k] ** TIGHTEN_EXPONENT)
     return out
