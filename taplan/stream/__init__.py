@@ -8,11 +8,14 @@
 from __future__ import annotations
 
 from taplan.stream.joint_streamer import POSITION_TOLERANCE, JointStreamer
+from taplan.stream.pose_streamer import PoseStreamer, PoseStreamState
 from taplan.stream.safety import Watchdog, braking_distance, max_safe_velocity
 from taplan.stream.state import StreamState, StreamStatus
 
 __all__ = [
     "JointStreamer",
+    "PoseStreamer",
+    "PoseStreamState",
     "POSITION_TOLERANCE",
     "StreamState",
     "StreamStatus",

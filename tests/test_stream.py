@@ -1,0 +1,181 @@
+"""JointStreamer: continuity across retargets, smooth stop on timeout, rejected bad targets, limits in sweeps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.stream import JointStreamer, StreamStatus, braking_distance, max_safe_velocity
+from taplan.stream.sweep import random_scenario, run_scenario, stream_violations
+
+DT = 1.0 / 77.0  # [s]
+POS_TOL = 1e-7  # [rad]
+VEL_TOL = 1e-9  # [rad]/[s]
+
+
+@pytest.fixture(scope="module")
+def limits(teleavatar: taplan.Robot) -> taplan.JointLimits:
+    return teleavatar.planning_limits
+
+
+@pytest.fixture
+def streamer(limits, teleavatar) -> JointStreamer:
+    return JointStreamer(limits, DT, initial=teleavatar.home, timeout=1.0)
+
+
+def _violations(states, limits, initial):
+    from taplan.stream.sweep import StreamRecord
+
+    record = StreamRecord(
+        np.array([s.time for s in states]),
+        np.array([s.position for s in states]),
+        np.array([s.velocity for s in states]),
+        np.array([s.acceleration for s in states]),
+        np.array([s.jerk for s in states]),
+        [s.status.value for s in states],
+        np.array([s.new_calculation for s in states]),
+    )
+    return stream_violations(record, limits, DT, initial)
+
+
+def test_reaches_target_and_reports_it(streamer, limits, teleavatar):
+    goal = teleavatar.home + 0.2 * np.sign(limits.upper - teleavatar.home) * 0.5
+    streamer.set_target(goal)
+    states = [streamer.step() for _ in range(300)]
+    assert states[-1].reached
+    np.testing.assert_allclose(states[-1].position, goal, atol=POS_TOL)
+    np.testing.assert_allclose(states[-1].velocity, 0.0, atol=VEL_TOL)
+    assert all(v == 0 for v in _violations(states, limits, teleavatar.home).values())
+
+
+def test_retargets_keep_state_continuous(streamer, limits, teleavatar, rng):
+    states = []
+    for _ in range(20):  # a new target every 7 periods, mid-motion
+        streamer.set_target(rng.uniform(limits.lower, limits.upper))
+        for _step in range(7):
+            states.append(streamer.step())
+    retargets = [i for i, s in enumerate(states) if s.new_calculation]
+    assert len(retargets) >= 19
+    counts = _violations(states, limits, teleavatar.home)
+    assert counts == dict.fromkeys(counts, 0)
+    # at each retarget the acceleration moves by at most jerk * dt: no jump
+    for i in retargets[1:]:
+        assert np.all(np.abs(states[i].acceleration - states[i - 1].acceleration) <= limits.jerk * DT * (1 + 1e-9))
+
+
+def test_timeout_brakes_smoothly_to_rest(limits, teleavatar):
+    streamer = JointStreamer(limits, DT, initial=teleavatar.home, timeout=0.3)
+    far = np.where(teleavatar.home > 0.5 * (limits.lower + limits.upper), limits.lower, limits.upper)
+    streamer.set_target(far)
+    states = [streamer.step() for _ in range(200)]
+    statuses = [s.status for s in states]
+    assert StreamStatus.STOPPING in statuses
+    first_stop = statuses.index(StreamStatus.STOPPING)
+    assert first_stop * DT == pytest.approx(0.3, abs=2 * DT)
+    assert statuses[-1] is StreamStatus.STOPPED
+    np.testing.assert_allclose(states[-1].velocity, 0.0, atol=VEL_TOL)
+    assert not np.allclose(states[-1].position, far)  # stopped short of the stale target
+    counts = _violations(states, limits, teleavatar.home)
+    assert counts == dict.fromkeys(counts, 0)
+    streamer.set_target(teleavatar.home)  # a new target resumes
+    assert streamer.step().status is StreamStatus.MOVING
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [np.full(14, np.nan), np.full(14, np.inf), np.zeros(13), np.zeros((2, 14)), "abc"],
+    ids=["nan", "inf", "short", "2d", "text"],
+)
+def test_bad_target_rejected_motion_kept(streamer, limits, teleavatar, bad):
+    goal = 0.5 * (limits.lower + limits.upper)
+    streamer.set_target(goal)
+    for _ in range(10):
+        streamer.step()
+    before = streamer.target
+    with pytest.raises(taplan.StreamError):
+        streamer.set_target(bad)
+    np.testing.assert_array_equal(streamer.target[0], before[0])
+    state = streamer.step()
+    assert not state.new_calculation  # still on the same trajectory
+    assert state.status is StreamStatus.MOVING
+
+
+def test_out_of_bounds_clamped_or_raised(limits, teleavatar):
+    clamp = JointStreamer(limits, DT, initial=teleavatar.home)
+    beyond = limits.upper + 0.5
+    assert clamp.set_target(beyond) is True
+    np.testing.assert_array_equal(clamp.target[0], limits.upper)
+    states = [clamp.step() for _ in range(400)]
+    assert states[-1].target_adjusted
+    assert np.all(np.array([s.position for s in states]) <= limits.upper)
+    strict = JointStreamer(limits, DT, initial=teleavatar.home, on_out_of_bounds="raise")
+    with pytest.raises(taplan.StreamError, match="outside"):
+        strict.set_target(beyond)
+    with pytest.raises(taplan.StreamError, match="exceeds"):
+        strict.set_target(teleavatar.home, velocities=2 * limits.velocity)
+
+
+def test_target_velocity_capped_by_braking_room(limits, teleavatar):
+    streamer = JointStreamer(limits, DT, initial=teleavatar.home)
+    near = limits.upper - 0.01
+    streamer.set_target(near, velocities=limits.velocity)  # toward the bound at full speed: impossible to stop
+    q, v = streamer.target
+    room = limits.upper - q
+    assert np.all(braking_distance(v, limits.acceleration, limits.jerk) + np.abs(v) * DT <= room + 1e-12)
+    states = [streamer.step() for _ in range(300)]
+    assert np.all(np.array([s.position for s in states]) <= limits.upper)
+    assert states[-1].status is StreamStatus.STOPPED  # reached the moving target, then braked
+
+
+def test_braking_distance_inverse(rng):
+    a, j = rng.uniform(1, 40, 50), rng.uniform(10, 400, 50)
+    v = rng.uniform(0, 10, 50)
+    d = braking_distance(v, a, j)
+    np.testing.assert_allclose(max_safe_velocity(d, a, j), v, rtol=1e-9)
+
+
+def test_reset_validates_measured_state(limits, teleavatar):
+    streamer = JointStreamer(limits, DT)
+    with pytest.raises(taplan.StreamError):
+        streamer.step()
+    outside = teleavatar.home.copy()
+    outside[0] = limits.upper[0] + 0.01
+    with pytest.raises(taplan.InvalidInputError, match="l_joint1"):
+        streamer.reset(outside)
+    state = streamer.reset(outside, clamp=True)
+    assert state.position[0] == limits.upper[0]
+    with pytest.raises(taplan.InvalidInputError, match="velocity"):
+        streamer.reset(teleavatar.home, velocity=2 * limits.velocity)
+    moving = streamer.reset(teleavatar.home, velocity=0.1 * limits.velocity * np.sign(teleavatar.home))
+    assert moving.status is StreamStatus.STOPPING
+    states = [streamer.step() for _ in range(100)]
+    assert states[-1].status is StreamStatus.STOPPED
+
+
+@pytest.mark.parametrize("synchronization", ["time", "phase", "none"])
+def test_seeded_sweep_no_violations(limits, synchronization):
+    rng = np.random.default_rng(7)
+    streamer = JointStreamer(limits, DT, synchronization=synchronization, timeout=0.5)
+    totals: dict[str, int] = {}
+    rejected = 0
+    for _ in range(40):
+        scenario = random_scenario(limits, rng, duration=2.0, timeout=0.5)
+        record = run_scenario(streamer, scenario)
+        rejected += record.rejected
+        for key, value in stream_violations(record, limits, DT, scenario.initial).items():
+            totals[key] = totals.get(key, 0) + value
+    assert totals == dict.fromkeys(totals, 0)
+    assert rejected > 0  # malformed targets were exercised
+
+
+@pytest.mark.slow
+def test_large_seeded_sweep(teleavatar):
+    for limits, dt in ((teleavatar.planning_limits, 1 / 50), (teleavatar.limits, 1 / 77)):
+        rng = np.random.default_rng(11)
+        streamer = JointStreamer(limits, dt)
+        for _ in range(300):
+            scenario = random_scenario(limits, rng)
+            record = run_scenario(streamer, scenario)
+            counts = stream_violations(record, limits, dt, scenario.initial)
+            assert counts == dict.fromkeys(counts, 0)

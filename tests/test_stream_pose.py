@@ -1,0 +1,82 @@
+"""PoseStreamer: reaches poses through the IK within the joint limits, flags unreachable poses, rejects bad ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.stream import PoseStreamer, StreamStatus
+from taplan.stream.sweep import StreamRecord, stream_violations
+
+DT = 1.0 / 77.0  # [s]
+POS_TOL = 2e-3  # [m]: convergence of the IK reference
+
+
+@pytest.fixture(scope="module")
+def streamer(teleavatar):
+    return PoseStreamer(teleavatar, DT, collision=False, posture_cost=1e-4)
+
+
+def _record(states):
+    return StreamRecord(
+        np.array([s.time for s in states]),
+        np.array([s.position for s in states]),
+        np.array([s.velocity for s in states]),
+        np.array([s.acceleration for s in states]),
+        np.array([s.jerk for s in states]),
+        [s.status.value for s in states],
+        np.array([s.new_calculation for s in states]),
+    )
+
+
+def test_dual_arm_poses_reached_within_limits(streamer, teleavatar):
+    q0 = teleavatar.home
+    streamer.reset(q0)
+    targets = {}
+    for frame, offset in (("left_ee", [0.04, 0.02, -0.03]), ("right_ee", [0.03, -0.02, 0.04])):
+        T = teleavatar.frame_pose(q0, frame).copy()
+        T[:3, 3] += offset
+        targets[frame] = T
+    states = []
+    for k in range(230):  # 3 s, targets re-sent at ~15 Hz
+        if k % 5 == 0:
+            streamer.set_target(targets)
+        states.append(streamer.step())
+    last = states[-1]
+    assert max(last.position_error.values()) < POS_TOL
+    for frame, T in targets.items():
+        np.testing.assert_allclose(teleavatar.frame_pose(last.position, frame)[:3, 3], T[:3, 3], atol=POS_TOL)
+    counts = stream_violations(_record(states), streamer.limits, DT, q0)
+    assert counts == dict.fromkeys(counts, 0)
+
+
+def test_unreachable_pose_approached_and_flagged(streamer, teleavatar):
+    q0 = teleavatar.home
+    streamer.reset(q0)
+    far = teleavatar.frame_pose(q0, "left_ee").copy()
+    far[:3, 3] += [1.0, 0.0, 0.0]  # beyond reach (0.55 m arm)
+    states = []
+    for k in range(200):
+        if k % 5 == 0:
+            streamer.set_target({"left_ee": far})
+        states.append(streamer.step())
+    assert "left_ee" in states[-1].unreachable
+    assert not states[-1].pose_reached
+    assert states[-1].position_error["left_ee"] < states[0].position_error["left_ee"] - 0.05  # got closer
+    counts = stream_violations(_record(states), streamer.limits, DT, q0)
+    assert counts == dict.fromkeys(counts, 0)
+
+
+def test_bad_pose_rejected_and_timeout_stops(teleavatar):
+    streamer = PoseStreamer(teleavatar, DT, frames=("left_ee",), collision=False, timeout=0.3, initial=teleavatar.home)
+    T = teleavatar.frame_pose(teleavatar.home, "left_ee").copy()
+    T[:3, 3] += [0.0, 0.0, 0.08]
+    streamer.set_target({"left_ee": T})
+    for bad in ({"left_ee": np.full((4, 4), np.nan)}, {"right_ee": T}, {"left_ee": np.eye(3)}, {}):
+        with pytest.raises(taplan.StreamError):
+            streamer.set_target(bad)
+    states = [streamer.step() for _ in range(150)]
+    assert StreamStatus.STOPPING in [s.status for s in states]
+    assert states[-1].status is StreamStatus.STOPPED
+    np.testing.assert_allclose(states[-1].velocity, 0.0, atol=1e-9)
