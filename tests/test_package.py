@@ -63,3 +63,12 @@ def test_pyproject_declares_the_design_card_dependencies():
     assert {"bench", "dev"} <= set(project["optional-dependencies"])
     assert project["scripts"]["taplan"] == "taplan.cli:main"
     assert (ROOT / "taplan" / "py.typed").exists()
+
+
+def test_readme_commands_are_the_ones_ci_runs():
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text()
+    test_command = ".venv/bin/python -m pytest -q"
+    assert test_command in readme and test_command in ci
+    assert 'pip install -e ".[dev,bench]"' in readme and '-e ".[dev,bench]"' in ci
+    assert ".venv/bin/taplan demo" in readme
