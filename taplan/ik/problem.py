@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from scipy.linalg.lapack import dposv as _dposv
 
 from taplan.errors import InvalidInputError, SolverError
 from taplan.ik._kinematics import Kinematics
@@ -217,11 +218,12 @@ class ProblemBuilder:
 
 def _free_velocity(H: np.ndarray, c: np.ndarray, out: np.ndarray) -> None:
     """Unconstrained minimiser ``-H⁻¹ c`` (least squares if H is singular)."""
-    try:
-        out[:] = np.linalg.solve(H, c)
-    except np.linalg.LinAlgError:
+    _, x, info = _dposv(H, c, lower=0, overwrite_a=0, overwrite_b=0)
+    if info == 0:
+        np.negative(x, out=out)
+    else:  # not positive definite: least squares
         out[:] = np.linalg.lstsq(H, c, rcond=None)[0]
-    np.negative(out, out=out)
+        np.negative(out, out=out)
     if not np.all(np.isfinite(out)):
         out[:] = 0.0
 

@@ -42,7 +42,8 @@ def capsule_pair_distance(
             continue
         J = kin.joint_jacobian(joint)
         r = point - data.oMi[joint].translation
-        grad += sign * (n @ J[:3] + np.cross(r, n) @ J[3:])
+        rxn = np.array([r[1] * n[2] - r[2] * n[1], r[2] * n[0] - r[0] * n[2], r[0] * n[1] - r[1] * n[0]])
+        grad += sign * (n @ J[:3] + rxn @ J[3:])
     return norm - first.radius - second.radius, grad, pa, pb
 
 
@@ -65,7 +66,9 @@ class CollisionLimit(RowLimit):
     The exact distances are only recomputed when they could have changed enough to matter: a point on an arm moves
     at most ``reach Σ_j |Δq_j|`` (``reach`` bounds the distance from any arm joint to any capsule point), so until
     ``reach ‖q − q_eval‖₁`` reaches the clearance ``min d − influence`` found at ``q_eval`` no pair can enter the
-    influence distance.
+    influence distance. With an acceleration limit a pair is also evaluated (and constrained) early enough to brake:
+    the clearance must exceed ``1.5 s² / (2α) + 2 s dt`` with the approach speed ``s = −J_d v_prev`` (gradients of
+    the last evaluation).
 
     Args:
         pairs: Capsule pairs (e.g. ``robot.capsule_pairs("left", "right")``).
@@ -105,9 +108,12 @@ class CollisionLimit(RowLimit):
         self._q_eval = np.full(model.nv, np.nan)
         self._clearance = -np.inf
         self._min_distance = np.inf
-        self._alpha_min = 1.0  # [m/s²], refreshed at each exact evaluation
         self._scratch = np.empty(model.nv)
         self.distances = np.full(len(self.pairs), np.inf)
+        self._distances_eval = np.full(len(self.pairs), np.inf)
+        self._grads = np.zeros((len(self.pairs), model.nv))
+        self._inv_two_alpha = np.zeros(len(self.pairs))
+        self._approach = np.zeros(len(self.pairs))
 
     def reset(self) -> None:
         """Forget the last exact evaluation (e.g. after a jump in configuration)."""
@@ -128,25 +134,33 @@ class CollisionLimit(RowLimit):
         np.subtract(q, self._q_eval, out=s)
         np.abs(s, out=s)
         travel = self.reach * float(s.sum())
-        horizon = 0.0
-        if self.acceleration is not None:  # distance the arms may need to brake from their current speed
-            np.abs(ctx.v_prev, out=s)
-            speed = self.reach * float(s.sum())
-            horizon = 1.5 * speed * speed / (2.0 * self._alpha_min) + 2.0 * speed * dt
-        if travel + horizon < self._clearance:  # nan-safe: nan fails the test and forces an evaluation
+        if self.acceleration is None:
+            skip = travel < self._clearance  # nan-safe: nan fails the test and forces an evaluation
+        else:  # also leave room to brake from the current approach speeds (gradients of the last evaluation)
+            approach = self._approach
+            np.matmul(self._grads, ctx.v_prev, out=approach)
+            np.negative(approach, out=approach)
+            np.maximum(approach, 0.0, out=approach)
+            horizon = approach * approach
+            horizon *= self._inv_two_alpha
+            horizon *= 1.5
+            horizon += 2.0 * dt * approach
+            np.subtract(self._distances_eval, horizon, out=horizon)
+            skip = float(horizon.min()) - travel > self.influence  # nan-safe as above
+        if skip:
             self._min_distance = self._clearance + self.influence - travel
             return 0
         k = 0
-        alpha_min = np.inf
         for i, (first, second) in enumerate(self.pairs):
             d, grad, _, _ = capsule_pair_distance(ctx.kin, first, second)
             self.distances[i] = d
+            self._grads[i] = grad
             gap = d - self.margin - self.buffer
             rate = self.gain * gap / dt
             active = d < self.influence
             if self.acceleration is not None:
                 alpha = 0.5 * float(np.abs(grad) @ self.acceleration)
-                alpha_min = min(alpha_min, alpha)
+                self._inv_two_alpha[i] = 1.0 / max(2.0 * alpha, 1e-9)
                 approach = max(0.0, -float(grad @ ctx.v_prev))
                 active = active or gap < 1.5 * approach * approach / (2.0 * alpha) + 2.0 * approach * dt
                 if gap > 0.0:
@@ -156,9 +170,8 @@ class CollisionLimit(RowLimit):
             np.negative(grad, out=G[k])
             h[k] = rate
             k += 1
-        if np.isfinite(alpha_min) and alpha_min > 0.0:
-            self._alpha_min = alpha_min
         self._q_eval[:] = q
+        self._distances_eval[:] = self.distances
         d_min = float(self.distances.min())
         self._clearance = d_min - self.influence
         self._min_distance = d_min

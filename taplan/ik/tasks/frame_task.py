@@ -53,6 +53,7 @@ class FrameTask(Task):
         self._weights = np.concatenate(
             [check_cost(position_cost, "position_cost", 3), check_cost(orientation_cost, "orientation_cost", 3)]
         )
+        self._unit = bool(np.all(self._weights == 1.0))
         self.target: np.ndarray | None = None
         self._R_target_T = np.eye(3)
         self._p_target = np.zeros(3)
@@ -100,11 +101,14 @@ class FrameTask(Task):
         M = placement.rotation @ self._R_target_T
         J = kin.frame_jacobian(self.frame_id)
         w = self._weights
-        np.multiply(w[:3, None], J[:3], out=A[:3])
         np.matmul(pin.Jlog3(M).T, J[3:], out=A[3:])
-        A[3:] *= w[3:, None]
-        g = -self.gain
         np.subtract(placement.translation, self._p_target, out=b[:3])
         b[3:] = pin.log3(M)
-        b *= w
-        b *= g
+        if self._unit:
+            A[:3] = J[:3]
+            b *= -self.gain
+        else:
+            np.multiply(w[:3, None], J[:3], out=A[:3])
+            A[3:] *= w[3:, None]
+            b *= w
+            b *= -self.gain
