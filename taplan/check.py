@@ -529,9 +529,9 @@ def _times(values: npt.ArrayLike) -> np.ndarray:
 
 def _limits(limits: JointLimits | None, names: Sequence[str]) -> JointLimits:
     if limits is None:
-        from taplan.robot import Robot
+        from taplan.robot import teleavatar_limits
 
-        limits = Robot.teleavatar().limits
+        limits = teleavatar_limits()
     if not isinstance(limits, JointLimits):
         raise InvalidInputError("limits", type(limits).__name__, "a taplan.JointLimits")
     if tuple(limits.names) == tuple(names):

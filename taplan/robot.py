@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,15 @@ from taplan.collision import Capsule, capsules_from_urdf
 from taplan.errors import ConfigError, InvalidInputError, UnknownNameError
 from taplan.limits import DEFAULT_PLANNING_SCALING, JointLimits
 
-__all__ = ["Robot", "ArmGroup", "MODELS_DIR", "TELEAVATAR_URDF", "TELEAVATAR_ARM_CONFIG", "TELEAVATAR_SYSTEM_CONFIG"]
+__all__ = [
+    "Robot",
+    "ArmGroup",
+    "teleavatar_limits",
+    "MODELS_DIR",
+    "TELEAVATAR_URDF",
+    "TELEAVATAR_ARM_CONFIG",
+    "TELEAVATAR_SYSTEM_CONFIG",
+]
 
 # taplan/models is a link to the repository's models/ folder, so a source checkout and a built wheel find the
 # bundled files at the same place.
@@ -326,3 +335,9 @@ def _adjust_pose(path: str | Path) -> np.ndarray:
     if right.shape != (7,) or not np.all(np.isfinite(right)):
         raise ConfigError(f"{str(path)!r}: the last robot.adjust_pose.right entry must hold 7 finite numbers")
     return right
+
+
+@lru_cache(maxsize=1)
+def teleavatar_limits() -> JointLimits:
+    """The bundled TeleAvatar's hardware limits (frozen, loaded once): the default of checks and controller models."""
+    return Robot.teleavatar().limits

@@ -189,7 +189,7 @@ def _names(joint_names: Sequence[str] | None, n: int) -> tuple[str, ...]:
 
 def _limits(limits: JointLimits | None, names: tuple[str, ...]) -> JointLimits:
     if limits is None:
-        from taplan.robot import Robot
+        from taplan.robot import teleavatar_limits
 
-        limits = Robot.teleavatar().limits
+        limits = teleavatar_limits()
     return limits if tuple(limits.names) == names else limits.subset(names)
