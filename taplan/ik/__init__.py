@@ -25,9 +25,9 @@ from taplan.ik.limits import (
     TargetBraking,
     VelocityLimit,
 )
-from taplan.ik.problem import Problem, ProblemBuilder, build_ik, solve_ik
+from taplan.ik.problem import Problem, ProblemBuilder, build_ik, solve_ik, solve_problem
 from taplan.ik.solve_pose import IKResult, solve_pose
-from taplan.ik.solvers import ProxQPSolver, QPSolver, QPSolversSolver, available_solvers, get_solver
+from taplan.ik.solvers import DAQPSolver, ProxQPSolver, QPSolver, QPSolversSolver, available_solvers, get_solver
 from taplan.ik.tasks import DampingTask, FrameTask, PostureTask, RelativeFrameTask, Task
 
 __all__ = [
@@ -40,6 +40,7 @@ __all__ = [
     "ProblemBuilder",
     "build_ik",
     "solve_ik",
+    "solve_problem",
     "Task",
     "FrameTask",
     "RelativeFrameTask",
@@ -55,6 +56,7 @@ __all__ = [
     "CollisionLimit",
     "QPSolver",
     "ProxQPSolver",
+    "DAQPSolver",
     "QPSolversSolver",
     "get_solver",
     "available_solvers",

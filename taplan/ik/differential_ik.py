@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -131,6 +132,8 @@ class DifferentialIK:
         self._v = np.zeros(robot.nq)
         self._q_next = np.zeros(robot.nq)
         self._initialised = False
+        self.steps = 0
+        self.qp_solves = 0
         self.reset(robot.home)
 
     # ------------------------------------------------------------------------------------------------------ state
@@ -177,9 +180,9 @@ class DifferentialIK:
             if task is None:
                 raise UnknownNameError("task frame", frame, self.frames)
             if type(target) is np.ndarray and target.shape == (4, 4) and target.dtype == np.float64:
-                if not np.isfinite(target).all():
+                if not math.isfinite(target.sum()):  # NaN or inf anywhere (or values near the float limit)
                     raise InvalidInputError(f"targets[{frame!r}]", target, "finite values (no NaN or inf)")
-                task._set(target.copy())
+                task._set(target)
             else:
                 task._set(as_transform(target, f"targets[{frame!r}]"))
 
@@ -204,16 +207,25 @@ class DifferentialIK:
             self.set_targets(targets)
         q_now = self._q if q is None else self.robot.check_configuration(q, "q")
         problem = self.builder.build(q_now, self.dt, self._v)
-        v = project(problem, self.solver.solve(problem))
-        q_next = q_now + v * self.dt
-        self._q[:] = q_next
+        solver = self.solver
+        if solver.exact_shortcut and problem.minimiser_is_feasible():
+            v = problem.minimiser  # the QP's exact optimum (see taplan.ik.problem.solve_problem)
+            iterations = 0
+        else:
+            v = project(problem, solver.solve(problem))
+            iterations = solver.iterations
+            self.qp_solves += 1
+        self.steps += 1
         self._v[:] = v
+        q_next = v * self.dt
+        q_next += q_now
+        self._q[:] = q_next
         collision = self.collision
         return IKStep(
             v.copy(),
             q_next,
             np.inf if collision is None else collision.min_distance,
-            self.solver.iterations,
+            iterations,
             problem,
         )
 

@@ -13,6 +13,10 @@ becoming empty, see :mod:`taplan.ik.limits.limit`) and soft rows ``G v - s <= h`
 penalised by ``slack_linear s + slack_quadratic s² / 2`` (an exact penalty: zero whenever the rows are feasible
 together with the box and their multipliers stay below ``slack_linear``).
 
+When ``H`` is positive definite and its unconstrained minimiser already satisfies the box and the rows, it is the
+QP's optimum and no solver is called (:func:`solve_problem`; exact, not an approximation). In tracking this is
+most steps.
+
 The box is hard: after the solver returns, ``v`` is projected onto it (a no-op up to the solver's tolerance), so
 solver tolerances can never breach the acceleration bound ``a dt`` however small ``dt`` is.
 """
@@ -29,16 +33,19 @@ from scipy.linalg.lapack import dposv as _dposv
 
 from taplan.errors import InvalidInputError, SolverError
 from taplan.ik._kinematics import Kinematics
-from taplan.ik.limits.limit import BoxLimit, RowLimit, StepContext, intersect_relaxed
+from taplan.ik.limits.limit import BoxLimit, RowLimit, StepContext, intersect_stacked
 from taplan.ik.tasks.task import Task
 
 if TYPE_CHECKING:
     from taplan.ik.solvers import QPSolver
 
-__all__ = ["Problem", "ProblemBuilder", "build_ik", "solve_ik", "SLACK_LINEAR", "SLACK_QUADRATIC"]
+__all__ = ["Problem", "ProblemBuilder", "build_ik", "solve_ik", "solve_problem", "SLACK_LINEAR", "SLACK_QUADRATIC"]
 
 SLACK_LINEAR = 1e4  # penalty per [m/s] of violation of a soft row
 SLACK_QUADRATIC = 1e2  # quadratic penalty per [m/s]²
+
+
+_SIGN = np.array([[1.0], [-1.0]])
 
 
 @dataclass
@@ -56,10 +63,14 @@ class Problem:
         h: Right-hand sides (m,) [m/s].
         dt: Step duration [s].
         v_prev: Previous commanded velocity [rad/s] (nv,).
-        v_free: Minimiser without constraints [rad/s] (nv,).
-        layers: ``(name, lower, upper)`` of each box limit in the order applied (for ``relaxations``).
+        v_free: Minimiser of the objective before the box limits' scaling (``objective_scale``) [rad/s] (nv,).
+        layers: ``(name, stacked)`` of each box limit in the order applied, ``stacked`` (2, nv) being
+            ``[upper, -lower]`` (for ``relaxations``).
         slack_linear: Linear slack penalty.
         slack_quadratic: Quadratic slack penalty.
+        minimiser: Exact unconstrained minimiser ``-H⁻¹ c`` of this objective [rad/s] (nv,) (valid if
+            ``minimiser_exact``).
+        minimiser_exact: Whether ``H`` was positive definite, so that ``minimiser`` is the unique minimiser.
     """
 
     H: np.ndarray
@@ -71,9 +82,11 @@ class Problem:
     dt: float
     v_prev: np.ndarray
     v_free: np.ndarray
-    layers: list[tuple[str, np.ndarray, np.ndarray]] = field(default_factory=list)
+    layers: list[tuple[str, np.ndarray]] = field(default_factory=list)
     slack_linear: float = SLACK_LINEAR
     slack_quadratic: float = SLACK_QUADRATIC
+    minimiser: np.ndarray | None = None
+    minimiser_exact: bool = False
 
     @property
     def nv(self) -> int:
@@ -87,13 +100,12 @@ class Problem:
 
     def relaxations(self) -> dict[str, np.ndarray]:
         """Per box limit, which joints had that bound relaxed (bool (nv,)), replaying the intersection."""
-        lo = np.full(self.nv, -np.inf)
-        hi = np.full(self.nv, np.inf)
-        scratch = np.empty(self.nv)
+        box = np.full((2, self.nv), np.inf)
+        scratch = np.empty_like(box)
         out = {}
-        for name, new_lo, new_hi in self.layers:
-            out[name] = (new_lo > hi) | (new_hi < lo)
-            intersect_relaxed(lo, hi, new_lo, new_hi, scratch)
+        for name, new in self.layers:
+            out[name] = (new[0] < -box[1]) | (new[1] < -box[0])  # new upper < lower or new lower > upper
+            intersect_stacked(box, new, scratch)
         return out
 
     def objective(self, v: npt.ArrayLike) -> float:
@@ -113,10 +125,21 @@ class Problem:
             self.dt,
             self.v_prev.copy(),
             self.v_free.copy(),
-            [(n, lo.copy(), hi.copy()) for n, lo, hi in self.layers],
+            [(n, s.copy()) for n, s in self.layers],
             self.slack_linear,
             self.slack_quadratic,
+            None if self.minimiser is None else self.minimiser.copy(),
+            self.minimiser_exact,
         )
+
+    def minimiser_is_feasible(self) -> bool:
+        """Whether the exact unconstrained minimiser satisfies the box and every row (it is then the QP optimum)."""
+        x = self.minimiser
+        if not self.minimiser_exact or x is None:
+            return False
+        if not (np.all(x <= self.upper) and np.all(x >= self.lower)):
+            return False
+        return self.n_rows == 0 or bool(np.all(self.G @ x <= self.h))
 
 
 class ProblemBuilder:
@@ -136,8 +159,6 @@ class ProblemBuilder:
         limits: Sequence[BoxLimit | RowLimit] = (),
         damping: float = 1e-12,
     ) -> None:
-        if not (np.isfinite(damping) and damping >= 0.0):
-            raise InvalidInputError("damping", damping, "a number >= 0")
         self.kin = kin
         self.tasks = list(tasks)
         self.box_limits = sorted((lim for lim in limits if isinstance(lim, BoxLimit)), key=lambda lim: lim.priority)
@@ -146,69 +167,97 @@ class ProblemBuilder:
         if unknown:
             raise InvalidInputError("limits", unknown, "BoxLimit or RowLimit instances")
         n = kin.nv
-        self.damping = float(damping)
         rows = sum(t.rows for t in self.tasks)
         self._A = np.zeros((rows, n))
+        self._AT = self._A.T
         self._b = np.zeros(rows)
         self._views = []
         start = 0
         for t in self.tasks:
-            self._views.append((t, self._A[start : start + t.rows], self._b[start : start + t.rows]))
+            self._views.append((t.fill, self._A[start : start + t.rows], self._b[start : start + t.rows]))
             start += t.rows
         self._H = np.zeros((n, n))
         self._c = np.zeros(n)
-        self._diag = np.arange(n) * (n + 1)
-        self._lower = np.empty(n)
-        self._upper = np.empty(n)
-        self._scratch = np.empty(n)
+        self._box = np.full((2, n), np.inf)
+        self._scratch = np.empty((2, n))
+        self._upper = self._box[0]
+        self._lower = np.full(n, -np.inf)
         self._v_prev = np.zeros(n)
         self._v_free = np.zeros(n)
+        self._minimiser = np.zeros(n)
         max_rows = sum(lim.max_rows for lim in self.row_limits)
         self._G = np.zeros((max_rows, n))
         self._h = np.zeros(max_rows)
-        self._needs_free = any(lim.needs_free_velocity for lim in self.box_limits)
         self._ctx = StepContext(kin, 0.01, self._v_prev, self._v_free)
+        self.damping = damping
         self.problem = Problem(
-            self._H, self._c, self._lower, self._upper, self._G[:0], self._h[:0], 0.01, self._v_prev, self._v_free
+            self._H,
+            self._c,
+            self._lower,
+            self._upper,
+            self._G[:0],
+            self._h[:0],
+            0.01,
+            self._v_prev,
+            self._v_free,
+            minimiser=self._minimiser,
         )
+
+    @property
+    def damping(self) -> float:
+        """Levenberg-Marquardt damping ``λ`` on the Hessian's diagonal."""
+        return self._damping
+
+    @damping.setter
+    def damping(self, value: float) -> None:
+        if not (np.isfinite(value) and value >= 0.0):
+            raise InvalidInputError("damping", value, "a number >= 0")
+        self._damping = float(value)
+        self._damping_matrix = self._damping * np.eye(self.kin.nv)
 
     def build(self, q: np.ndarray, dt: float, v_prev: np.ndarray | None = None) -> Problem:
         """Update kinematics at ``q`` [rad] and fill the problem for a step of ``dt`` [s] (inputs not validated)."""
         kin = self.kin
         kin.update(q)
-        for task, A, b in self._views:
-            task.fill(kin, A, b)
+        for fill, A, b in self._views:
+            fill(kin, A, b)
         H, c = self._H, self._c
-        np.matmul(self._A.T, self._A, out=H)
-        if self.damping:
-            H.flat[self._diag] += self.damping
-        np.matmul(self._A.T, self._b, out=c)
+        np.matmul(self._AT, self._A, out=H)
+        if self._damping:
+            H += self._damping_matrix
+        np.matmul(self._AT, self._b, out=c)
         c *= -1.0 / dt
         if v_prev is None:
-            self._v_prev[:] = 0.0
+            self._v_prev.fill(0.0)
         else:
             self._v_prev[:] = v_prev
         ctx = self._ctx
         ctx.dt = dt
-        if self._needs_free:
-            _free_velocity(H, c, self._v_free)
-        lower, upper = self._lower, self._upper
-        lower.fill(-np.inf)
-        upper.fill(np.inf)
-        layers = self.problem.layers
+        problem = self.problem
+        problem.minimiser_exact = _free_velocity(H, c, self._v_free)
+        box = self._box
+        layers = problem.layers
         layers.clear()
         scale = 1.0
+        first = True
         for lim in self.box_limits:
-            lo, hi = lim.bounds(ctx)
-            intersect_relaxed(lower, upper, lo, hi, self._scratch)
-            layers.append((lim.name, lo, hi))
+            new = lim.stacked(ctx)
+            if first:
+                np.copyto(box, new)
+                first = False
+            else:
+                intersect_stacked(box, new, self._scratch)
+            layers.append((lim.name, new))
             scale *= lim.objective_scale
+        np.negative(box[1], out=self._lower)
         if scale != 1.0:
             c *= scale
+            np.multiply(self._v_free, scale, out=self._minimiser)
+        else:
+            self._minimiser[:] = self._v_free
         k = 0
         for lim in self.row_limits:
             k += lim.rows(ctx, self._G[k:], self._h[k:])
-        problem = self.problem
         problem.dt = dt
         if problem.h.shape[0] != k:
             problem.G = self._G[:k]
@@ -216,16 +265,17 @@ class ProblemBuilder:
         return problem
 
 
-def _free_velocity(H: np.ndarray, c: np.ndarray, out: np.ndarray) -> None:
-    """Unconstrained minimiser ``-H⁻¹ c`` (least squares if H is singular)."""
+def _free_velocity(H: np.ndarray, c: np.ndarray, out: np.ndarray) -> bool:
+    """Unconstrained minimiser ``-H⁻¹ c`` into ``out`` (least squares if H is singular); True if H is definite."""
     _, x, info = _dposv(H, c, lower=0, overwrite_a=0, overwrite_b=0)
     if info == 0:
         np.negative(x, out=out)
-    else:  # not positive definite: least squares
-        out[:] = np.linalg.lstsq(H, c, rcond=None)[0]
-        np.negative(out, out=out)
+        return True
+    out[:] = np.linalg.lstsq(H, c, rcond=None)[0]  # not positive definite: least squares
+    np.negative(out, out=out)
     if not np.all(np.isfinite(out)):
         out[:] = 0.0
+    return False
 
 
 def build_ik(
@@ -274,8 +324,21 @@ def solve_ik(problem: Problem, solver: str | QPSolver = "proxqp") -> np.ndarray:
     from taplan.ik.solvers import get_solver
 
     backend = get_solver(solver) if isinstance(solver, str) else solver
-    v = backend.solve(problem)
-    return project(problem, v)
+    return solve_problem(problem, backend).copy()
+
+
+def solve_problem(problem: Problem, backend: QPSolver) -> np.ndarray:
+    """Solve with ``backend``, skipping it when the unconstrained minimiser is already feasible.
+
+    When ``H`` is positive definite and its unconstrained minimiser satisfies the box and every row, that
+    minimiser *is* the QP's optimum (zero slack, the objective's global minimum), so backends that allow it
+    (``backend.exact_shortcut``) are not called. Returns the velocity [rad/s] (nv,) projected onto the box (a
+    buffer of the problem or backend: copy to keep).
+    """
+    if backend.exact_shortcut and problem.minimiser_is_feasible():
+        backend.iterations = 0
+        return problem.minimiser
+    return project(problem, backend.solve(problem))
 
 
 def project(problem: Problem, v: np.ndarray) -> np.ndarray:

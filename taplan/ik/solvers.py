@@ -15,7 +15,7 @@ import numpy as np
 from taplan.errors import SolverError, UnknownNameError
 from taplan.ik.problem import Problem
 
-__all__ = ["QPSolver", "ProxQPSolver", "QPSolversSolver", "get_solver", "available_solvers", "SOLVERS"]
+__all__ = ["QPSolver", "ProxQPSolver", "DAQPSolver", "QPSolversSolver", "get_solver", "available_solvers", "SOLVERS"]
 
 SOLVERS = ("proxqp", "daqp", "quadprog", "osqp")
 _BIG = 1e20  # proxqp's and our stand-in for an infinite bound
@@ -50,14 +50,25 @@ def get_solver(name: str, **options: Any) -> QPSolver:
         raise UnknownNameError("QP solver", name, valid)
     if name == "proxqp":
         return ProxQPSolver(**options)
+    if name == "daqp":
+        return DAQPSolver(**options)
     return QPSolversSolver(name, **options)
 
 
 class QPSolver(abc.ABC):
-    """A QP backend. ``solve`` returns the velocity part of the solution (nv,) [rad/s] (a buffer it re-uses)."""
+    """A QP backend. ``solve`` returns the velocity part of the solution (nv,) [rad/s] (a buffer it re-uses).
+
+    Attributes:
+        name: Backend name.
+        iterations: Iterations of the last solve (0 if not reported or not called).
+        exact_shortcut: Whether callers may skip ``solve`` when the problem's unconstrained minimiser is feasible
+            (it is then the exact optimum; :func:`taplan.ik.problem.solve_problem`). False by default so that a
+            custom backend sees every problem; True for the built-in backends.
+    """
 
     name: str
     iterations: int = 0
+    exact_shortcut: bool = False
 
     @abc.abstractmethod
     def solve(self, problem: Problem) -> np.ndarray:
@@ -146,6 +157,7 @@ class ProxQPSolver(QPSolver):
     """
 
     name = "proxqp"
+    exact_shortcut = True
 
     def __init__(self, eps_abs: float = 1e-9, max_iter: int = 1000) -> None:
         self.eps_abs = float(eps_abs)
@@ -165,6 +177,81 @@ class ProxQPSolver(QPSolver):
         self._workspaces.clear()
 
 
+class DAQPSolver(QPSolver):
+    """DAQP (dual active set) called directly, with buffers re-used between calls.
+
+    For this problem (14 variables, a box and a few soft rows) the dual active-set method needs no tolerance on the
+    box (active bounds hold exactly) and is the cheapest of the backends. Warm start: the previous solution's
+    active set (``primal_start``) when ``warm_start`` is True.
+
+    Args:
+        warm_start: Start from the previous solution's active set.
+        **settings: DAQP settings (``primal_tol``, ``dual_tol``, ``iter_limit``, ...).
+    """
+
+    name = "daqp"
+    exact_shortcut = True
+    _INF = 1e30  # DAQP's infinity
+
+    def __init__(self, warm_start: bool = False, **settings: Any) -> None:
+        import daqp
+
+        self._solve = daqp.solve
+        self.warm_start = bool(warm_start)
+        self.settings = dict(settings)
+        self._buffers: dict[tuple[int, int], tuple[np.ndarray, ...]] = {}
+        self._last: dict[tuple[int, int], np.ndarray] = {}
+
+    def _workspace(self, n: int, m: int) -> tuple[np.ndarray, ...]:
+        from ctypes import c_int
+
+        ws = self._buffers.get((n, m))
+        if ws is None:
+            H = np.zeros((n + m, n + m))
+            f = np.zeros(n + m)
+            A = np.zeros((m, n + m))
+            if m:
+                A[:, n:] = -np.eye(m)
+            upper = np.full(n + 2 * m, self._INF)
+            lower = np.full(n + 2 * m, -self._INF)
+            lower[n : n + m] = 0.0  # slacks >= 0
+            sense = np.zeros(n + 2 * m, dtype=c_int)
+            ws = self._buffers[(n, m)] = (H, f, A, upper, lower, sense)
+        return ws
+
+    def solve(self, problem: Problem) -> np.ndarray:
+        n, m = problem.nv, problem.n_rows
+        H, f, A, upper, lower, sense = self._workspace(n, m)
+        np.minimum(problem.upper, self._INF, out=upper[:n])
+        np.maximum(problem.lower, -self._INF, out=lower[:n])
+        if m == 0:
+            H, f = problem.H, problem.c
+        else:
+            H[:n, :n] = problem.H
+            H.flat[(n + m + 1) * n :: n + m + 1] = problem.slack_quadratic
+            f[:n] = problem.c
+            f[n:] = problem.slack_linear
+            A[:, :n] = problem.G
+            upper[n + m :] = problem.h
+        start = self._last.get((n, m)) if self.warm_start else None
+        try:
+            if start is None:
+                x, _, flag, info = self._solve(H, f, A, upper, lower, sense, **self.settings)
+            else:
+                x, _, flag, info = self._solve(H, f, A, upper, lower, sense, primal_start=start, **self.settings)
+        except Exception as exc:  # the extension raises its own types
+            raise SolverError(f"daqp failed: {exc}", problem.copy()) from exc
+        if flag < 1:
+            raise SolverError(f"daqp failed: exit flag {flag}", problem.copy())
+        if self.warm_start:
+            self._last[(n, m)] = x
+        self.iterations = int(info.get("iterations", 0))
+        return x[:n]
+
+    def reset(self) -> None:
+        self._last.clear()
+
+
 class QPSolversSolver(QPSolver):
     """Any qpsolvers backend (``daqp``, ``quadprog``, ``osqp``, ...); no state between calls.
 
@@ -172,6 +259,8 @@ class QPSolversSolver(QPSolver):
         name: qpsolvers backend name.
         **options: Passed to the backend (e.g. ``eps_abs`` for osqp).
     """
+
+    exact_shortcut = True
 
     def __init__(self, name: str, **options: Any) -> None:
         self.name = name

@@ -7,12 +7,15 @@ import numpy.typing as npt
 
 from taplan._validation import as_vector
 from taplan.errors import InvalidInputError
-from taplan.ik.limits.limit import BoxLimit, StepContext
+from taplan.ik.limits.limit import StackedBoxLimit, StepContext
 
 __all__ = ["AccelerationLimit", "TargetBraking"]
 
+_SIGN = np.array([[1.0], [-1.0]])
+_TINY = 1e-300  # [rad/s], only to make 0/0 a ratio of 1
 
-class AccelerationLimit(BoxLimit):
+
+class AccelerationLimit(StackedBoxLimit):
     r"""Bound the change of velocity between consecutive steps.
 
     The previous commanded velocity ``v_prev`` [rad/s] is explicit state (``StepContext.v_prev``, owned by the
@@ -38,21 +41,20 @@ class AccelerationLimit(BoxLimit):
         if np.any(a <= 0.0):
             raise InvalidInputError("acceleration", a, "accelerations > 0 [rad/s²]")
         self.acceleration = a.copy()
-        self._lower = np.empty(a.size)
-        self._upper = np.empty(a.size)
-        self._step = np.empty(a.size)
+        self._out = np.empty((2, a.size))
         self._dt = -1.0
 
-    def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
+    def stacked(self, ctx: StepContext) -> np.ndarray:
         if ctx.dt != self._dt:
             self._dt = ctx.dt
-            np.multiply(self.acceleration, ctx.dt, out=self._step)
-        np.subtract(ctx.v_prev, self._step, out=self._lower)
-        np.add(ctx.v_prev, self._step, out=self._upper)
-        return self._lower, self._upper
+            self._step = np.tile(self.acceleration * ctx.dt, (2, 1))
+        out = self._out
+        np.multiply(_SIGN, ctx.v_prev, out=out)
+        out += self._step
+        return out
 
 
-class TargetBraking(BoxLimit):
+class TargetBraking(StackedBoxLimit):
     r"""Approach the task target no faster than the acceleration limit can stop at it.
 
     The objective's unconstrained minimiser ``v_free`` gives, per joint, the displacement to the (linearised)
@@ -86,36 +88,36 @@ class TargetBraking(BoxLimit):
             raise InvalidInputError("acceleration", a, "accelerations > 0 [rad/s²]")
         self.acceleration = a.copy()
         n = a.size
-        self._lower = np.empty(n)
-        self._upper = np.empty(n)
         self._bound = np.empty(n)
-        self._mask = np.empty(n, dtype=bool)
         self._speed = np.empty(n)
+        self._ratio = np.empty(n)
+        self._direction = np.empty((2, n))
+        self._out = np.empty((2, n))
         self.objective_scale = 1.0
         self._dt = -1.0
 
-    def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
+    def stacked(self, ctx: StepContext) -> np.ndarray:
         dt = ctx.dt
         if dt != self._dt:
             self._dt = dt
             self._adt = self.acceleration * dt
             self._adt2 = self._adt * self._adt
             self._two_a_dt = 2.0 * self.acceleration * dt
-        bound = self._bound
-        np.abs(ctx.v_free, out=bound)  # |δ| / dt
-        bound *= self._two_a_dt
+        bound, speed, ratio = self._bound, self._speed, self._ratio
+        np.abs(ctx.v_free, out=speed)  # |δ| / dt
+        np.multiply(speed, self._two_a_dt, out=bound)
         bound += self._adt2
         np.sqrt(bound, out=bound)
         bound -= self._adt
-        speed = self._speed
-        np.abs(ctx.v_free, out=speed)
-        speed += 1e-12  # [rad/s]: joints the target does not move get ratio 1, not 0/0
-        np.divide(bound + 1e-12, speed, out=speed)
-        self.objective_scale = min(1.0, float(speed.min()))
-        np.less(ctx.v_free, 0.0, out=self._mask)  # moving down: no upper bound from braking
-        np.copyto(self._upper, bound)
-        self._upper[self._mask] = np.inf
-        np.negative(bound, out=self._lower)
-        np.greater(ctx.v_free, 0.0, out=self._mask)
-        self._lower[self._mask] = -np.inf
-        return self._lower, self._upper
+        np.add(bound, _TINY, out=ratio)
+        speed += _TINY  # [rad/s]: joints the target does not move get ratio 1, not 0/0
+        ratio /= speed
+        kappa = float(ratio.min())
+        # slightly below the ratio so that kappa |v_free| <= bound holds after rounding (the minimiser stays inside)
+        self.objective_scale = 1.0 if kappa >= 1.0 else kappa * (1.0 - 1e-12)
+        direction = self._direction
+        np.multiply(_SIGN, ctx.v_free, out=direction)
+        out = self._out
+        np.copyto(out, bound)  # broadcast to both rows
+        out[direction < 0.0] = np.inf  # moving away from the target: no braking bound on that side
+        return out

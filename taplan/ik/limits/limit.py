@@ -12,8 +12,15 @@ it is relaxed to the nearest point of that interval instead of making the proble
    joint then brakes or returns at the acceleration limit),
 4. braking toward the task target (relaxed like 3).
 
+So the acceleration limit always wins: a joint that moves too fast to stop before its position limit (e.g. a state
+handed to ``reset`` with a large velocity next to a bound) brakes at the full acceleration limit and crosses the bound
+by what physics requires, ``v² / (2a)`` minus the remaining distance, then comes back.
+
 Row limits (collision avoidance) are inequality rows ``G v <= h`` made soft by one slack variable each with a large
 penalty, so they can never make the QP infeasible either.
+
+Internally a box is *stacked*: an array (2, nv) whose rows are ``upper`` and ``-lower``, so one elementwise minimum
+intersects both sides and the relaxation is a maximum with the row-swapped, negated previous box.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ import numpy as np
 
 from taplan.ik._kinematics import Kinematics
 
-__all__ = ["BoxLimit", "RowLimit", "StepContext", "intersect_relaxed"]
+__all__ = ["BoxLimit", "RowLimit", "StepContext", "intersect_relaxed", "intersect_stacked"]
 
 
 @dataclass
@@ -37,7 +44,7 @@ class StepContext:
         dt: Step duration [s].
         v_prev: Previous commanded velocity [rad/s], shape (nv,).
         v_free: Minimiser of the objective without constraints [rad/s], shape (nv,) (filled by the problem
-            builder before the limits that need it; see ``needs_free_velocity``).
+            builder before the box limits are evaluated).
     """
 
     kin: Kinematics
@@ -48,6 +55,8 @@ class StepContext:
 
 class BoxLimit(abc.ABC):
     """A limit that bounds each joint velocity: ``lower <= v <= upper`` [rad/s].
+
+    Subclasses implement ``bounds``; the built-in limits also implement ``stacked`` directly (the hot path).
 
     Attributes:
         name: Short name, used in ``Problem.relaxations``.
@@ -60,10 +69,33 @@ class BoxLimit(abc.ABC):
     priority: int = 50
     needs_free_velocity: bool = False
     objective_scale: float = 1.0  # factor the builder applies to the linear term after ``bounds``
+    _stacked_buffer: np.ndarray | None = None
 
     @abc.abstractmethod
     def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
         """Velocity bounds (lower, upper) [rad/s], each (nv,); ±inf where unbounded. Buffers may be re-used."""
+
+    def stacked(self, ctx: StepContext) -> np.ndarray:
+        """The bounds as one array (2, nv): ``[upper, -lower]`` [rad/s] (a buffer re-used by the next call)."""
+        lower, upper = self.bounds(ctx)
+        out = self._stacked_buffer
+        if out is None or out.shape[1] != upper.shape[0]:
+            out = self._stacked_buffer = np.empty((2, upper.shape[0]))
+        out[0] = upper
+        np.negative(lower, out=out[1])
+        return out
+
+
+class StackedBoxLimit(BoxLimit):
+    """A box limit that computes its stacked bounds directly; ``bounds`` is derived from them."""
+
+    def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
+        s = self.stacked(ctx)
+        return -s[1], s[0].copy()
+
+    @abc.abstractmethod
+    def stacked(self, ctx: StepContext) -> np.ndarray:
+        """The bounds as one array (2, nv): ``[upper, -lower]`` [rad/s]."""
 
 
 class RowLimit(abc.ABC):
@@ -96,3 +128,14 @@ def intersect_relaxed(
     np.minimum(upper, new_upper, out=upper)
     np.maximum(upper, lower, out=upper)
     lower[:] = scratch
+
+
+def intersect_stacked(box: np.ndarray, new: np.ndarray, scratch: np.ndarray) -> None:
+    """:func:`intersect_relaxed` on stacked boxes (2, nv) ``[upper, -lower]``, in place (three operations).
+
+    ``new upper = max(min(upper, new_upper), lower)`` and ``new lower = min(max(lower, new_lower), upper)``, both
+    from the old box: in stacked form ``box = max(min(box, new), -box[::-1])``.
+    """
+    np.negative(box[::-1], out=scratch)
+    np.minimum(box, new, out=box)
+    np.maximum(box, scratch, out=box)

@@ -7,12 +7,14 @@ import numpy.typing as npt
 
 from taplan._validation import as_vector
 from taplan.errors import InvalidInputError
-from taplan.ik.limits.limit import BoxLimit, StepContext
+from taplan.ik.limits.limit import StackedBoxLimit, StepContext
 
 __all__ = ["PositionLimit"]
 
+_SIGN = np.array([[1.0], [-1.0]])
 
-class PositionLimit(BoxLimit):
+
+class PositionLimit(StackedBoxLimit):
     r"""Keep ``q + v dt`` within the joint range.
 
     Without an acceleration limit the bound is ``gain (q_max - q) / dt`` (and the mirror image below). With an
@@ -25,7 +27,9 @@ class PositionLimit(BoxLimit):
 
     The bound is 0 at ``D = 0`` and, if the previous step respected it, ``v_prev - a dt`` respects the new one (the
     braking sequence stays feasible). Outside the range (``D < 0``) the bound is ``gain D / dt``: the joint is sent
-    back; when the acceleration limit cannot follow, the bound is relaxed (see :mod:`taplan.ik.limits.limit`).
+    back; when the acceleration limit cannot follow, the bound is relaxed (see :mod:`taplan.ik.limits.limit`). The
+    same relaxation applies when the joint already moves too fast to stop before the bound: acceleration limits win,
+    so the joint brakes at ``a`` and overruns the bound by what physics requires.
 
     Args:
         lower: Lower bounds [rad], shape (nv,).
@@ -55,35 +59,37 @@ class PositionLimit(BoxLimit):
         self.acceleration = None if acceleration is None else as_vector(acceleration, "acceleration", n).copy()
         if self.acceleration is not None and np.any(self.acceleration <= 0.0):
             raise InvalidInputError("acceleration", self.acceleration, "accelerations > 0 [rad/s²]")
-        self._n = n
-        self._distance = np.empty(2 * n)
-        self._neg = np.empty(2 * n)
-        self._bound = np.empty(2 * n)
-        self._a2 = np.empty(2 * n) if self.acceleration is None else np.tile(self.acceleration, 2)
-        self._lower_out = np.empty(n)
+        self._range = np.stack([self.upper, -self.lower])  # stacked: distance = range - sign q
+        self._distance = np.empty((2, n))
+        self._neg = np.empty((2, n))
+        self._out = np.empty((2, n))
+        self._two_a = None if self.acceleration is None else np.tile(2.0 * self.acceleration, (2, 1))
         self._dt = -1.0
 
-    def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
-        n, dt, q = self._n, ctx.dt, ctx.kin.q
-        D, neg, out = self._distance, self._neg, self._bound
-        np.subtract(self.upper, q, out=D[:n])
-        np.subtract(q, self.lower, out=D[n:])
-        np.minimum(D, 0.0, out=neg)
-        neg *= self.gain / dt
+    def stacked(self, ctx: StepContext) -> np.ndarray:
+        dt = ctx.dt
+        D, out = self._distance, self._out
+        np.multiply(_SIGN, ctx.kin.q, out=D)
+        np.subtract(self._range, D, out=D)
         if self.acceleration is None:
-            np.maximum(D, 0.0, out=out)
-            out *= self.gain / dt
+            np.multiply(D, self.gain / dt, out=out)  # gain max(D, 0) / dt + gain min(D, 0) / dt
+            return out
+        if dt != self._dt:
+            self._dt = dt
+            self._adt = 0.5 * self._two_a * dt
+            self._adt2 = self._adt * self._adt
+        inside = float(D.min()) >= 0.0
+        if inside:  # within the range (the usual case)
+            np.multiply(D, self._two_a, out=out)
         else:
-            if dt != self._dt:
-                self._dt = dt
-                self._adt = self._a2 * dt
-                self._adt2 = self._adt * self._adt
-                self._two_a = 2.0 * self._a2
+            neg = self._neg
+            np.minimum(D, 0.0, out=neg)
+            neg *= self.gain / dt
             np.maximum(D, 0.0, out=out)
             out *= self._two_a
-            out += self._adt2
-            np.sqrt(out, out=out)
-            out -= self._adt
-        out += neg
-        np.negative(out[n:], out=self._lower_out)
-        return self._lower_out, out[:n]
+        out += self._adt2
+        np.sqrt(out, out=out)
+        out -= self._adt
+        if not inside:
+            out += self._neg
+        return out

@@ -7,12 +7,12 @@ import numpy.typing as npt
 
 from taplan._validation import as_vector
 from taplan.errors import InvalidInputError
-from taplan.ik.limits.limit import BoxLimit, StepContext
+from taplan.ik.limits.limit import StackedBoxLimit, StepContext
 
 __all__ = ["VelocityLimit"]
 
 
-class VelocityLimit(BoxLimit):
+class VelocityLimit(StackedBoxLimit):
     """Bound ``-v_max <= v <= v_max``.
 
     Args:
@@ -27,8 +27,7 @@ class VelocityLimit(BoxLimit):
         if np.any(v <= 0.0):
             raise InvalidInputError("velocity", v, "velocity limits > 0 [rad/s]")
         self.velocity = v.copy()
-        self._lower = -self.velocity
-        self._upper = self.velocity.copy()
+        self._stacked = np.stack([self.velocity, self.velocity])
 
-    def bounds(self, ctx: StepContext) -> tuple[np.ndarray, np.ndarray]:
-        return self._lower, self._upper
+    def stacked(self, ctx: StepContext) -> np.ndarray:
+        return self._stacked

@@ -8,7 +8,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from taplan.ik._kinematics import Kinematics
+from taplan.ik._kinematics import LOCAL_WORLD_ALIGNED, Kinematics
 from taplan.ik._targets import as_transform
 from taplan.ik.tasks.task import Task, check_cost, check_gain
 
@@ -55,18 +55,18 @@ class FrameTask(Task):
         )
         self._unit = bool(np.all(self._weights == 1.0))
         self.target: np.ndarray | None = None
-        self._R_target_T = np.eye(3)
-        self._p_target = np.zeros(3)
+        self._target = np.eye(4)
+        self._R_target_T = self._target[:3, :3].T  # views of the target buffer
+        self._p_target = self._target[:3, 3]
 
     def set_target(self, target: Any) -> None:
         """Target pose ``T_root_frame``: 4x4, ``(position, quaternion_xyzw)`` or (7,) (validated)."""
         self._set(as_transform(target, f"target[{self.name}]" if self.name else "target"))
 
     def _set(self, T: np.ndarray) -> None:
-        """Set a 4x4 target that is already validated (hot path)."""
-        self.target = T
-        self._R_target_T = np.ascontiguousarray(T[:3, :3].T)
-        self._p_target = T[:3, 3].copy()
+        """Set a 4x4 target that is already validated (hot path; copied into the task's buffer)."""
+        self._target[:] = T
+        self.target = self._target
 
     def set_target_from_configuration(self, kin: Kinematics) -> None:
         """Target = the frame's current pose (hold it)."""
@@ -97,17 +97,25 @@ class FrameTask(Task):
         return J
 
     def fill(self, kin: Kinematics, A: np.ndarray, b: np.ndarray) -> None:
-        placement = kin.data.oMf[self.frame_id]
-        M = placement.rotation @ self._R_target_T
-        J = kin.frame_jacobian(self.frame_id)
+        if self.target is None:
+            self._require_target()
+        pose = kin.data.oMf[self.frame_id].homogeneous
+        M = np.matmul(pose[:3, :3], self._R_target_T)
+        J = pin.getFrameJacobian(kin.model, kin.data, self.frame_id, LOCAL_WORLD_ALIGNED)
         w = self._weights
         np.matmul(pin.Jlog3(M).T, J[3:], out=A[3:])
-        np.subtract(placement.translation, self._p_target, out=b[:3])
-        b[3:] = pin.log3(M)
-        if self._unit:
+        if self._unit and self.gain == 1.0:
+            np.subtract(self._p_target, pose[:3, 3], out=b[:3])
+            np.negative(pin.log3(M), out=b[3:])
+            A[:3] = J[:3]
+        elif self._unit:
+            np.subtract(pose[:3, 3], self._p_target, out=b[:3])
+            b[3:] = pin.log3(M)
             A[:3] = J[:3]
             b *= -self.gain
         else:
+            np.subtract(pose[:3, 3], self._p_target, out=b[:3])
+            b[3:] = pin.log3(M)
             np.multiply(w[:3, None], J[:3], out=A[:3])
             A[3:] *= w[3:, None]
             b *= w
