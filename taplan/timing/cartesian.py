@@ -8,11 +8,16 @@ Method
 2. **Samples.** ``λ`` starts on a uniform grid of ``max(ceil(|Δp| / step), ceil(θ / angle_step), 2)`` intervals over
    the moving frames (``step`` [m], ``angle_step`` [rad], ``θ`` the rotation angle A to B): 5 mm and 0.05 rad by
    default, so a 12 cm line has 24 intervals.
-3. **IK continuation.** Each sample is solved by :func:`taplan.ik.solve_pose` warm-started from the previous sample
-   (no random restarts, small steps, tight tolerance ``ik_tolerance``; a sample where IK stalls within a quarter of
-   ``max_deviation`` is accepted too), within the position limits. Joints that no
-   moving frame depends on are held exactly (the other arm stays still); another group's end effector whose joints
-   overlap the moving ones is held by an IK target at its start pose.
+3. **IK continuation.** Each sample is solved by damped least-squares Newton iterations on the moving joints,
+   warm-started from the previous sample (the minimum-norm step keeps the joint path close to the previous sample,
+   i.e. continuous), to ``ik_tolerance`` (a sample where IK stalls within a quarter of ``max_deviation`` is accepted
+   too). Position bounds are hard: a joint that would leave its bound is locked and the step re-solved with the
+   others. Joints within ``LIMIT_ZONE`` of a bound are pushed inwards in the task's null space (gradient
+   projection, ``NULL_SPACE_RATE``). Independent frames (each arm) are solved separately. Joints that no moving
+   frame depends on are held exactly (the other arm stays still); another group's end effector whose joints
+   overlap the moving ones is held by an IK target at its start pose. (This is the continuation loop of
+   :mod:`taplan.ik`'s damped least squares, specialised for following a line: :func:`taplan.ik.solve_pose`'s
+   posture term toward the warm start would bias the line.)
 4. **Adaptive refinement.** An interval is bisected (up to ``max_bisections`` times) when IK fails at its end, when a
    joint jumps by more than ``max_joint_step`` [rad] across it, or when the midpoint of the joint-space chord leaves
    the line by more than a quarter of ``max_deviation``. A failure that survives the bisections raises
@@ -71,6 +76,8 @@ IK_DAMPING = 1e-10  # damped least squares: constant part of the damping [m²]
 IK_LM_DAMPING = 1e-3  # Levenberg-Marquardt part, per squared error
 LIMIT_ZONE = 0.15  # fraction of a joint's range near each bound where the null-space avoidance acts
 NULL_SPACE_RATE = 1.0  # [rad] null-space motion away from a bound per unit of λ (a whole line), at the bound
+BOUND_MARGIN = 2e-3  # [rad] IK samples stay this far inside the position bounds (the spline may bulge between)
+AT_BOUND = 1e-3  # [rad] a joint this close to a bound is reported as blocking in an IK failure
 _METHODS = ("jerk", "topp")
 _MIN_MOTION = 1e-9  # [m] / [rad]: below this a frame's translation / rotation counts as zero
 
@@ -246,9 +253,8 @@ def _position_limits(robot: Robot, limits: JointLimits, q: np.ndarray) -> tuple[
         )
     lower = np.minimum(limits.lower, q)
     upper = np.maximum(limits.upper, q)
-    widened = tuple(
-        n for n, a, b, lo, hi in zip(limits.names, lower, upper, limits.lower, limits.upper) if a < lo or b > hi
-    )
+    moved = (lower < limits.lower) | (upper > limits.upper)
+    widened = tuple(n for n, w in zip(limits.names, moved, strict=True) if w)
     if not widened:
         return limits, ()
     return limits.replace(lower=lower, upper=upper), widened
@@ -284,8 +290,9 @@ class _Solver:
         self.max_deviation = max_deviation
         self.max_bisections = max_bisections
         self.data = robot.model.createData()
-        self.lower = np.asarray(limits.lower, dtype=float)
-        self.upper = np.asarray(limits.upper, dtype=float)
+        # IK keeps BOUND_MARGIN inside the bounds, so the timing spline between samples does not overshoot them
+        self.lower = np.asarray(limits.lower, dtype=float) + BOUND_MARGIN
+        self.upper = np.asarray(limits.upper, dtype=float) - BOUND_MARGIN
         self.zone = LIMIT_ZONE * (self.upper - self.lower)
 
     def _errors(
@@ -369,7 +376,7 @@ class _Solver:
         at_bound = [
             self.robot.joint_names[j]
             for j, v in zip(m, q_best[m], strict=True)
-            if v <= self.lower[j] + 1e-6 or v >= self.upper[j] - 1e-6
+            if v <= self.lower[j] + AT_BOUND or v >= self.upper[j] - AT_BOUND
         ]
         bound = f"; joints at their position bounds: {at_bound}" if at_bound else ""
         return q_warm, (
