@@ -296,6 +296,20 @@ class Trajectory:
             self.times, self.positions[:, idx], pick(self.velocities), pick(self.accelerations), joint_names
         )
 
+    def stretched(self, factor: float) -> Trajectory:
+        """The same path ``factor`` times slower (> 1) or faster (< 1), from the same start time.
+
+        Velocities scale by 1/factor, accelerations by 1/factor², jerks by 1/factor³, so ``factor >= 1`` keeps a
+        trajectory that respects limits within them. Exact: the result is a polynomial trajectory.
+        """
+        factor = as_positive(factor, "factor")
+        c = self.coefficients
+        scale = factor ** -np.arange(c.shape[1], dtype=float)
+        t0 = self.times[0]
+        return Trajectory.from_polynomials(
+            t0 + (self.times - t0) * factor, c * scale[None, :, None], self.joint_names, continuous_velocity=False
+        )
+
     def shifted(self, offset: float) -> Trajectory:
         """The same trajectory with ``offset`` [s] added to every time."""
         if self._polynomial:

@@ -159,3 +159,20 @@ def test_load_errors(tmp_path) -> None:  # noqa: ANN001
         Trajectory.load(bad)
     with pytest.raises(InvalidInputError, match="path"):
         Trajectory(TIMES, Q).save(tmp_path / "x.txt")
+
+
+def test_stretched_scales_derivatives_exactly():
+    t = np.array([0.0, 0.4, 1.0])
+    q = np.array([[0.0], [0.3], [0.5]])
+    v = np.array([[0.0], [0.6], [0.0]])
+    a = np.zeros((3, 1))
+    base = Trajectory(t, q, v, a)
+    slow = base.stretched(2.0)
+    assert slow.duration == pytest.approx(2.0)
+    probe = np.linspace(0.0, 1.0, 11)
+    np.testing.assert_allclose(slow(2.0 * probe), base(probe), atol=1e-12)
+    np.testing.assert_allclose(slow(2.0 * probe, 1), base(probe, 1) / 2.0, atol=1e-12)
+    np.testing.assert_allclose(slow(2.0 * probe, 2), base(probe, 2) / 4.0, atol=1e-12)
+    np.testing.assert_allclose(slow(2.0 * probe, 3), base(probe, 3) / 8.0, atol=1e-9)
+    with pytest.raises(InvalidInputError, match="factor"):
+        base.stretched(0.0)

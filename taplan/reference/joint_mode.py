@@ -31,6 +31,7 @@ from taplan.trajectory import Trajectory
 
 __all__ = ["ARM_KP", "JointModeRobot"]
 
+_SAME_INSTANT = 1e-9  # [s]: command and tick times closer than this coincide (float rounding of k / rate)
 ARM_KP = (7.0, 7.0, 10.0, 10.0, 10.0, 8.0, 8.0)  # [1/s], joints 1..7 of each arm (arm_config.yml fb_kp)
 
 
@@ -101,7 +102,8 @@ class JointModeRobot:
         dt = 1.0 / self.rate
         end = t_cmd[-1] + 0.5 if duration is None else as_positive(duration, "duration")
         ticks = np.arange(1, int(np.floor(end * self.rate + 1e-9)) + 1) * dt
-        latest = np.searchsorted(t_cmd, ticks, side="right") - 1
+        # a command that arrives at a tick (to rounding) is used at that tick
+        latest = np.searchsorted(t_cmd, ticks + _SAME_INSTANT, side="right") - 1
         fresh = (latest >= 0) & (ticks - t_cmd[np.maximum(latest, 0)] <= self.command_timeout)
         targets = np.clip(q_cmd[np.maximum(latest, 0)], lim.lower, lim.upper)
         out_q = np.empty((ticks.size, n))

@@ -101,9 +101,4 @@ def _eval_rows(c: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def time_scaled(traj: Trajectory, factor: float) -> Trajectory:
     """The same motion ``factor`` times slower (>1) or faster (<1): velocities / factor, accelerations / factor²."""
-    c = traj.coefficients
-    scale = float(factor) ** -np.arange(c.shape[1])
-    t0 = traj.times[0]
-    return Trajectory.from_polynomials(
-        t0 + (traj.times - t0) * factor, c * scale[None, :, None], traj.joint_names, continuous_velocity=False
-    )
+    return traj.stretched(factor)

@@ -1,0 +1,78 @@
+"""`taplan demo`: plans pass their checks, the guide's approaches show the velocity steps taplan's plans avoid."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.cli import main
+from taplan.demo import run_demo
+
+POSE_TOL = 1e-3  # [m]
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    return run_demo(tmp_path_factory.mktemp("demo"), plots=False)
+
+
+def test_every_plan_passes_every_reference_controller(demo):
+    assert [p.name for p in demo.plans] == ["reach", "line", "pick"]
+    for plan in demo.plans:
+        for label, report in plan.reports.items():
+            assert report.passed, (plan.name, label, report.failures)
+
+
+def test_plans_respect_the_planning_limits_and_start_at_home(demo):
+    robot = taplan.Robot.teleavatar()
+    limits = robot.planning_limits
+    for plan in demo.plans:
+        traj = plan.trajectory
+        t = np.linspace(traj.times[0], traj.times[-1], 3001)
+        if plan.name != "line":  # the line starts where the reach ends
+            np.testing.assert_allclose(traj.positions[0], robot.home, atol=1e-12)
+        assert np.all(np.abs(traj(t, 1)) <= limits.velocity * (1 + 1e-6))
+        assert np.all(np.abs(traj(t, 2)) <= limits.acceleration * (1 + 1e-6))
+        assert np.all(np.abs(traj(t, 3)) <= limits.jerk * (1 + 1e-6))
+        assert traj.duration * 100 == pytest.approx(round(traj.duration * 100), abs=1e-6)  # on the 10 ms grid
+
+
+def test_the_reach_plan_reaches_its_pose_targets(demo):
+    from taplan.demo import READY_POSE
+
+    robot = taplan.Robot.teleavatar()
+    end = demo.plans[0].trajectory.positions[-1]
+    for frame in ("left_ee", "right_ee"):
+        error = robot.frame_pose(end, frame)[:3, 3] - robot.frame_pose(READY_POSE, frame)[:3, 3]
+        assert np.linalg.norm(error) < POSE_TOL
+
+
+def test_guide_linear_interpolation_has_velocity_steps_taplan_does_not(demo):
+    by_name = {c.approach: c for c in demo.comparisons}
+    linear = by_name["guide: linear @50 Hz, position target"].report
+    ours = by_name["taplan: jerk-limited @100 Hz"].report
+    assert not linear.passed and ours.passed
+    worst = max(linear.joints, key=lambda j: j.max_velocity_step / j.acceleration_limit)
+    assert worst.max_velocity_step > 5 * max(j.max_velocity_step for j in ours.joints)
+    # a step the arm cannot follow within its acceleration ceiling in one 10 ms update
+    assert worst.max_velocity_step > worst.acceleration_limit * 0.01
+    assert all(j.max_velocity_step <= j.acceleration_limit * 0.01 for j in ours.joints)
+
+
+def test_outputs_are_written(demo):
+    names = {p.name for p in demo.files}
+    assert {"reach_100hz.csv", "line_100hz.csv", "pick_100hz.csv", "report.json"} <= names
+    report = json.loads((demo.out_dir / "report.json").read_text())
+    assert set(report["plans"]) == {"reach", "line", "pick"}
+    reloaded = taplan.Trajectory.load(demo.out_dir / "pick_100hz.csv")
+    np.testing.assert_allclose(reloaded.positions[-1], demo.plans[2].trajectory.positions[-1], atol=1e-9)
+
+
+def test_cli_demo_exit_code_and_report(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    out = capsys.readouterr().out
+    assert "guide: linear @50 Hz" in out and "PASS" in out
+    assert (tmp_path / "out" / "report.json").exists()
