@@ -137,9 +137,9 @@ class Problem:
         x = self.minimiser
         if not self.minimiser_exact or x is None:
             return False
-        if not (np.all(x <= self.upper) and np.all(x >= self.lower)):
+        if not ((x <= self.upper).all() and (x >= self.lower).all()):
             return False
-        return self.n_rows == 0 or bool(np.all(self.G @ x <= self.h))
+        return self.n_rows == 0 or bool((self.G @ x <= self.h).all())
 
 
 class ProblemBuilder:
@@ -267,7 +267,7 @@ class ProblemBuilder:
 
 def _free_velocity(H: np.ndarray, c: np.ndarray, out: np.ndarray) -> bool:
     """Unconstrained minimiser ``-H⁻¹ c`` into ``out`` (least squares if H is singular); True if H is definite."""
-    _, x, info = _dposv(H, c, lower=0, overwrite_a=0, overwrite_b=0)
+    _, x, info = _dposv(H.T, c)  # H is symmetric: its transpose is the Fortran-ordered view LAPACK wants (no copy)
     if info == 0:
         np.negative(x, out=out)
         return True

@@ -12,7 +12,6 @@ from taplan.ik.limits.limit import StackedBoxLimit, StepContext
 __all__ = ["AccelerationLimit", "TargetBraking"]
 
 _SIGN = np.array([[1.0], [-1.0]])
-_TINY = 1e-300  # [rad/s], only to make 0/0 a ratio of 1
 
 
 class AccelerationLimit(StackedBoxLimit):
@@ -103,15 +102,16 @@ class TargetBraking(StackedBoxLimit):
             self._adt = self.acceleration * dt
             self._adt2 = self._adt * self._adt
             self._two_a_dt = 2.0 * self.acceleration * dt
+            self._two_adt = 2.0 * self._adt
         bound, speed, ratio = self._bound, self._speed, self._ratio
         np.abs(ctx.v_free, out=speed)  # |δ| / dt
-        np.multiply(speed, self._two_a_dt, out=bound)
-        bound += self._adt2
-        np.sqrt(bound, out=bound)
-        bound -= self._adt
-        np.add(bound, _TINY, out=ratio)
-        speed += _TINY  # [rad/s]: joints the target does not move get ratio 1, not 0/0
-        ratio /= speed
+        # bound / speed = 2 a dt / (sqrt(a² dt² + 2 a dt speed) + a dt): no cancellation, and 1 (not 0/0) at speed 0
+        np.multiply(speed, self._two_a_dt, out=ratio)
+        ratio += self._adt2
+        np.sqrt(ratio, out=ratio)
+        ratio += self._adt
+        np.divide(self._two_adt, ratio, out=ratio)
+        np.multiply(ratio, speed, out=bound)
         kappa = float(ratio.min())
         # slightly below the ratio so that kappa |v_free| <= bound holds after rounding (the minimiser stays inside)
         self.objective_scale = 1.0 if kappa >= 1.0 else kappa * (1.0 - 1e-12)

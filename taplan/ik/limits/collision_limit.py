@@ -67,8 +67,8 @@ class CollisionLimit(RowLimit):
     at most ``reach Σ_j |Δq_j|`` (``reach`` bounds the distance from any arm joint to any capsule point), so until
     ``reach ‖q − q_eval‖₁`` reaches the clearance ``min d − influence`` found at ``q_eval`` no pair can enter the
     influence distance. With an acceleration limit a pair is also evaluated (and constrained) early enough to brake:
-    the clearance must exceed ``1.5 s² / (2α) + 2 s dt`` with the approach speed ``s = −J_d v_prev`` (gradients of
-    the last evaluation).
+    each pair's distance must exceed ``influence + 1.5 s² / (2α) + 2 s dt`` with the approach speed bounded by
+    ``s = Σ_j |J_d,j| |v_prev,j|`` (gradients of the last evaluation).
 
     Args:
         pairs: Capsule pairs (e.g. ``robot.capsule_pairs("left", "right")``).
@@ -110,10 +110,13 @@ class CollisionLimit(RowLimit):
         self._min_distance = np.inf
         self._scratch = np.empty(model.nv)
         self.distances = np.full(len(self.pairs), np.inf)
-        self._distances_eval = np.full(len(self.pairs), np.inf)
-        self._grads = np.zeros((len(self.pairs), model.nv))
         self._inv_two_alpha = np.zeros(len(self.pairs))
-        self._approach = np.zeros(len(self.pairs))
+        m = len(self.pairs)
+        self._abs_grads = np.zeros((m, model.nv))
+        self._braking_factor = np.zeros(m)
+        self._speed = np.zeros(m)
+        self._horizon = np.zeros(m)
+        self._distances_eval = np.full(m, np.inf)
 
     def reset(self) -> None:
         """Forget the last exact evaluation (e.g. after a jump in configuration)."""
@@ -129,32 +132,31 @@ class CollisionLimit(RowLimit):
         if not self.pairs:
             return 0
         q = ctx.kin.q
-        dt = ctx.dt
         s = self._scratch
         np.subtract(q, self._q_eval, out=s)
         np.abs(s, out=s)
         travel = self.reach * float(s.sum())
         if self.acceleration is None:
             skip = travel < self._clearance  # nan-safe: nan fails the test and forces an evaluation
-        else:  # also leave room to brake from the current approach speeds (gradients of the last evaluation)
-            approach = self._approach
-            np.matmul(self._grads, ctx.v_prev, out=approach)
-            np.negative(approach, out=approach)
-            np.maximum(approach, 0.0, out=approach)
-            horizon = approach * approach
-            horizon *= self._inv_two_alpha
-            horizon *= 1.5
-            horizon += 2.0 * dt * approach
+        else:  # also leave room to brake (see the class docstring)
+            np.abs(ctx.v_prev, out=s)
+            speed = self._speed
+            np.matmul(self._abs_grads, s, out=speed)  # per pair, a bound of the approach speed [m/s]
+            horizon = self._horizon
+            np.multiply(speed, self._braking_factor, out=horizon)  # 1.5 s / (2 α)
+            horizon += 2.0 * ctx.dt
+            horizon *= speed
             np.subtract(self._distances_eval, horizon, out=horizon)
             skip = float(horizon.min()) - travel > self.influence  # nan-safe as above
         if skip:
             self._min_distance = self._clearance + self.influence - travel
             return 0
+        dt = ctx.dt
         k = 0
         for i, (first, second) in enumerate(self.pairs):
             d, grad, _, _ = capsule_pair_distance(ctx.kin, first, second)
             self.distances[i] = d
-            self._grads[i] = grad
+            np.abs(grad, out=self._abs_grads[i])
             gap = d - self.margin - self.buffer
             rate = self.gain * gap / dt
             active = d < self.influence
@@ -171,7 +173,9 @@ class CollisionLimit(RowLimit):
             h[k] = rate
             k += 1
         self._q_eval[:] = q
-        self._distances_eval[:] = self.distances
+        if self.acceleration is not None:
+            np.multiply(self._inv_two_alpha, 1.5, out=self._braking_factor)
+            self._distances_eval[:] = self.distances
         d_min = float(self.distances.min())
         self._clearance = d_min - self.influence
         self._min_distance = d_min
