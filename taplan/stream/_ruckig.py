@@ -15,6 +15,7 @@ here, so the streamers never see ruckig's types. Pitfalls handled here:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 import ruckig
@@ -47,6 +48,9 @@ class RuckigAdapter:
         self.inp.max_acceleration = limits.acceleration.tolist()
         self.inp.max_jerk = limits.jerk.tolist()
         self._zeros = [0.0] * n
+        self.inp.target_acceleration = self._zeros  # never changes: every target is at zero acceleration
+        self._interface: tuple[object, object] | None = None  # (control interface, synchronization) last assigned
+        self._range = range(n)
 
     def set_state(self, position: list[float], velocity: list[float], acceleration: list[float]) -> None:
         """Overwrite the current state (a reset from a measured state)."""
@@ -55,22 +59,25 @@ class RuckigAdapter:
         self.inp.current_acceleration = acceleration
         self.otg.reset()
 
+    def _set_interface(self, interface: object, synchronization: object) -> None:
+        # each assignment crosses into C++ and copies: skip it when nothing changes (the hot path of retargeting)
+        key = (interface, synchronization)
+        if self._interface != key:
+            self.inp.control_interface = interface
+            self.inp.synchronization = synchronization
+            self._interface = key
+
     def set_position_target(self, position: list[float], velocity: list[float], synchronization: str) -> None:
         """Position interface: reach ``position`` with ``velocity`` and zero acceleration."""
+        self._set_interface(ruckig.ControlInterface.Position, _SYNCHRONIZATION[synchronization])
         inp = self.inp
-        inp.control_interface = ruckig.ControlInterface.Position
-        inp.synchronization = _SYNCHRONIZATION[synchronization]
         inp.target_position = position
         inp.target_velocity = velocity
-        inp.target_acceleration = self._zeros
 
     def set_brake(self) -> None:
         """Velocity interface to zero velocity and acceleration: the shortest jerk-limited stop."""
-        inp = self.inp
-        inp.control_interface = ruckig.ControlInterface.Velocity
-        inp.synchronization = ruckig.Synchronization.No
-        inp.target_velocity = self._zeros
-        inp.target_acceleration = self._zeros
+        self._set_interface(ruckig.ControlInterface.Velocity, ruckig.Synchronization.No)
+        self.inp.target_velocity = self._zeros
 
     def update(self) -> int:
         """One period of ruckig; returns ``WORKING`` or ``FINISHED``, raises :class:`StreamError` otherwise."""
@@ -88,28 +95,30 @@ class RuckigAdapter:
         self._lo = (lower - tolerance).tolist()
         self._hi = (upper + tolerance).tolist()
 
-    def leaves_bounds(self) -> bool:
-        """True when the new trajectory goes beyond the bounds set by :meth:`set_bounds`.
+    def leaves_bounds(self, joints: Iterable[int] | None = None) -> bool:
+        """True when the new trajectory goes beyond the bounds set by :meth:`set_bounds` (for ``joints``; all).
 
         ruckig's ``position_extrema`` misses an extremum inside a constant-acceleration segment (it looks for interior
         extrema only where the jerk is non-zero) and omits the straight tail of joints that arrive early without
         synchronisation; ``get_first_time_at_position`` can report a crossing that does not exist near a triple root.
-        So: a fast screen (reported extrema, end position, first time at each bound), and every joint the screen
-        flags is confirmed on its profile with :func:`profile_range` (exact: every segment's turning points).
+        So: a fast screen (end position, reported extrema, then first time at each bound, which finds every crossing
+        of a bound since the start is inside), and every joint the screen flags is confirmed on its profile with
+        :func:`profile_range` (exact: every segment's turning points). The screen costs about 0.7 [us] per joint.
         """
         trajectory = self.out.trajectory
         lo, hi = self._lo, self._hi
-        suspects = set()
-        for i, bound in enumerate(trajectory.position_extrema):
-            if bound.min < lo[i] or bound.max > hi[i]:
-                suspects.add(i)
         end = trajectory.at_time(trajectory.duration)[0]
+        extrema = trajectory.position_extrema
         first_time = trajectory.get_first_time_at_position
-        for i in range(self.n):
-            if end[i] < lo[i] or end[i] > hi[i]:
+        suspects = []
+        for i in self._range if joints is None else joints:
+            low, high = lo[i], hi[i]
+            e = end[i]
+            if e < low or e > high:
                 return True  # the end state is exact
-            if first_time(i, lo[i]) is not None or first_time(i, hi[i]) is not None:
-                suspects.add(i)
+            bound = extrema[i]
+            if bound.min < low or bound.max > high or first_time(i, low) is not None or first_time(i, high) is not None:
+                suspects.append(i)
         if not suspects:
             return False
         profiles = trajectory.profiles[0]

@@ -28,7 +28,7 @@ from taplan._validation import as_positive, as_vector
 from taplan.errors import InvalidInputError, StreamError
 from taplan.limits import JointLimits
 from taplan.stream._ruckig import FINISHED, RuckigAdapter
-from taplan.stream.safety import Watchdog, max_safe_velocity
+from taplan.stream.safety import Watchdog, braking_distance, max_safe_velocity
 from taplan.stream.state import StreamState, StreamStatus
 
 __all__ = ["JointStreamer", "POSITION_TOLERANCE"]
@@ -100,15 +100,22 @@ class JointStreamer:
         self._adapter.set_bounds(self._lower, self._upper, POSITION_TOLERANCE)
         self._watchdog = Watchdog(timeout)
         self._zeros = np.zeros(self.n)
+        self._zero_list = [0.0] * self.n  # shared, never mutated
+        # hot-path copies as Python floats: ruckig takes lists, and a 14-element Python loop beats small numpy calls
+        self._lower_list = self._lower.tolist()
+        self._upper_list = self._upper.tolist()
+        self._vmax_list = self._vmax.tolist()
+        self._inner_lower, self._inner_upper = _braking_box(limits, self.dt)
+        self._shape = (self.n,)
         self._state: StreamState | None = None
         self._time = 0.0
         self._mode = _POSITION
         self._pending: int | None = None  # _POSITION (new target) or _BRAKE (stop request), applied at next step
-        self._target_position = self._zeros
-        self._target_velocity = self._zeros
+        self._target_position: list[float] = self._zero_list
+        self._target_velocity: list[float] = self._zero_list
         self._target_moving = False
         self._target_adjusted = False
-        self._requested: tuple[np.ndarray, np.ndarray | None] | None = None
+        self._requested: tuple[list[float], list[float] | None] | None = None
         self._has_target = False
         self.last_fault: str | None = None
         if initial is not None:
@@ -135,12 +142,15 @@ class JointStreamer:
     @property
     def target(self) -> tuple[np.ndarray, np.ndarray]:
         """The admitted target: positions [rad] and velocities [rad]/[s], shape (n,) each."""
-        return self._target_position.copy(), self._target_velocity.copy()
+        return np.array(self._target_position), np.array(self._target_velocity)
 
     @property
     def requested_target(self) -> tuple[np.ndarray, np.ndarray | None] | None:
         """The last target as requested, before admission (None before any target)."""
-        return self._requested
+        if self._requested is None:
+            return None
+        positions, velocities = self._requested
+        return np.array(positions), None if velocities is None else np.array(velocities)
 
     # ------------------------------------------------------------------ commands
     def reset(
@@ -206,12 +216,12 @@ class JointStreamer:
             adapter.set_brake()
             self._mode = _BRAKE
         else:
-            adapter.set_position_target(q.tolist(), self._zeros.tolist(), self.synchronization)
+            adapter.set_position_target(q.tolist(), self._zero_list, self.synchronization)
             self._mode = _POSITION
         self._time = 0.0
         self._pending = None
-        self._target_position = q.copy()
-        self._target_velocity = self._zeros.copy()
+        self._target_position = q.tolist()
+        self._target_velocity = self._zero_list
         self._target_moving = False
         self._target_adjusted = False
         self._requested = None
@@ -237,6 +247,34 @@ class JointStreamer:
             StreamError: Wrong size, NaN or inf, or (``on_out_of_bounds="raise"``) a target outside the limits. The
                 stream keeps its previous target and motion.
         """
+        # Fast path (every call of a VR or pose stream): a float vector inside the bounds (and, with velocities,
+        # inside the box from which a full-speed stop fits) needs no numpy work at all. NaN fails the comparisons.
+        if type(positions) is np.ndarray and positions.shape == self._shape and positions.dtype.kind == "f":
+            q = positions.tolist()
+            if velocities is None:
+                if _inside(q, self._lower_list, self._upper_list):
+                    return self._admit(q, self._zero_list, None, False, False)
+            elif type(velocities) is np.ndarray and velocities.shape == self._shape and velocities.dtype.kind == "f":
+                v = velocities.tolist()
+                if _inside(q, self._inner_lower, self._inner_upper) and _within_speed(v, self._vmax_list):
+                    return self._admit(q, v, v, any(v), False)
+        return self._set_target_checked(positions, velocities)
+
+    def _admit(
+        self, q: list[float], v: list[float], requested_v: list[float] | None, moving: bool, adjusted: bool
+    ) -> bool:
+        self._requested = (q, requested_v)
+        self._target_position = q
+        self._target_velocity = v
+        self._target_moving = moving
+        self._target_adjusted = adjusted
+        self._pending = _POSITION
+        self._has_target = True
+        self._watchdog.feed(self._time)
+        return adjusted
+
+    def _set_target_checked(self, positions: npt.ArrayLike, velocities: npt.ArrayLike | None) -> bool:
+        """The general path of ``set_target``: validation, clamping or raising, braking-room speed caps."""
         q = _target_vector(positions, "positions", self.n)
         v = self._zeros if velocities is None else _target_vector(velocities, "velocities", self.n)
         raising = self.on_out_of_bounds == "raise"
@@ -270,18 +308,14 @@ class JointStreamer:
                     )
                 v = np.clip(v, -speed_cap, speed_cap)
                 adjusted = True
-        self._requested = (
-            np.array(positions, dtype=float),
-            None if velocities is None else np.array(velocities, dtype=float),
+        v_list = v.tolist()
+        return self._admit(
+            q_admitted.tolist(),
+            v_list,
+            None if velocities is None else _target_vector(velocities, "velocities", self.n).tolist(),
+            any(v_list),
+            adjusted,
         )
-        self._target_position = q_admitted
-        self._target_velocity = np.array(v, dtype=float)
-        self._target_moving = bool(np.any(self._target_velocity != 0.0))
-        self._target_adjusted = adjusted
-        self._pending = _POSITION
-        self._has_target = True
-        self._watchdog.feed(self._time)
-        return adjusted
 
     def stop(self) -> None:
         """Brake smoothly to rest from the next ``step()`` on (a new target resumes motion)."""
@@ -303,9 +337,7 @@ class JointStreamer:
             self._pending = None
             if pending == _POSITION:
                 self._mode = _POSITION
-                adapter.set_position_target(
-                    self._target_position.tolist(), self._target_velocity.tolist(), self.synchronization
-                )
+                adapter.set_position_target(self._target_position, self._target_velocity, self.synchronization)
             else:
                 self._mode = _BRAKE
                 adapter.set_brake()
@@ -327,7 +359,9 @@ class JointStreamer:
         velocity = np.array(out.new_velocity)
         acceleration = np.array(out.new_acceleration)
         jerk = np.array(out.new_jerk)
-        np.clip(position, self._lower, self._upper, out=position)  # ruckig's slack: at most POSITION_TOLERANCE
+        # ruckig's slack: at most POSITION_TOLERANCE (np.clip's wrapper costs twice these two ufuncs)
+        np.minimum(position, self._upper, out=position)
+        np.maximum(position, self._lower, out=position)
         out.pass_to_input(adapter.inp)
         if self._mode == _POSITION:
             if result == FINISHED:
@@ -371,11 +405,11 @@ class JointStreamer:
         """
         adapter = self._adapter
         if self._mode == _POSITION:
-            adapter.set_position_target(self._target_position.tolist(), self._zeros.tolist(), "none")
+            adapter.set_position_target(self._target_position, self._zero_list, "none")
             result = adapter.update()
             if not adapter.leaves_bounds():
                 if self._target_moving:
-                    self._target_velocity = self._zeros
+                    self._target_velocity = self._zero_list
                     self._target_moving = False
                     self._target_adjusted = True
                 return result
@@ -384,6 +418,46 @@ class JointStreamer:
                 return result
         logger.warning("stream: the braking trajectory leaves the position bounds; positions are clipped")
         return result
+
+
+def _inside(values: list[float], lower: list[float], upper: list[float]) -> bool:
+    """``lower <= values <= upper`` elementwise (False for NaN)."""
+    for x, low, high in zip(values, lower, upper, strict=True):  # noqa: SIM110 (a plain loop is faster than all())
+        if not low <= x <= high:
+            return False
+    return True
+
+
+def _within_speed(values: list[float], limit: list[float]) -> bool:
+    """``|values| <= limit`` elementwise (False for NaN)."""
+    for x, high in zip(values, limit, strict=True):  # noqa: SIM110
+        if not -high <= x <= high:
+            return False
+    return True
+
+
+def _braking_box(limits: JointLimits, dt: float) -> tuple[list[float], list[float]]:
+    """Positions [rad] from which ``set_target``'s speed cap cannot bind: any speed up to the limit is admitted.
+
+    Inside ``[lower + R, upper - R]`` every room is at least ``R``, where ``R`` solves ``R - v1(R) dt = d(w)``
+    (``v1`` = :func:`max_safe_velocity`, ``d`` = :func:`braking_distance`, ``w`` = the velocity limit over the speed
+    margin): the exact cap ``v2 = v1(R - v1(R) dt)`` is then at least ``w``, and it grows with the room while
+    ``d'(v) > dt`` at ``v >= w`` (checked; joints where it fails get an empty box and always take the exact path).
+    """
+    vmax, amax, jmax = limits.velocity, limits.acceleration, limits.jerk
+    w = vmax / _SPEED_MARGIN * (1.0 + 1e-9)
+    d_w = braking_distance(w, amax, jmax)
+    room = d_w.copy()
+    for _ in range(100):  # a contraction (factor dt / d'(v1) < 1), from below
+        room = d_w + dt * max_safe_velocity(room, amax, jmax)
+    room *= 1.0 + 1e-6
+    v1 = max_safe_velocity(room, amax, jmax)
+    v2 = max_safe_velocity(room - v1 * dt, amax, jmax)
+    slope = np.where(w <= amax * amax / jmax, 1.5 * np.sqrt(w / jmax), 0.5 * amax / jmax + w / amax)  # d'(w)
+    ok = (v2 >= w) & (slope > dt) & (2.0 * room < limits.upper - limits.lower)
+    lower = np.where(ok, limits.lower + room, np.inf)
+    upper = np.where(ok, limits.upper - room, -np.inf)
+    return lower.tolist(), upper.tolist()
 
 
 def _target_vector(value: npt.ArrayLike, name: str, size: int) -> np.ndarray:
