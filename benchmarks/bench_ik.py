@@ -309,6 +309,71 @@ def bench_converge(robot, count: int) -> list[dict[str, Any]]:
     ]
 
 
+# ------------------------------------------------------------------------------------------------------ 4. sweep
+SWEEP_VEL_TOL = 1e-9  # [rad/s]
+SWEEP_ACC_REL_TOL = 1e-9  # relative to a dt
+SWEEP_DIST_TOL = 2e-4  # [m], one step's linearisation error allowed below the margin
+SWEEP_MARGIN = 0.02  # [m], DifferentialIK's default collision margin
+
+
+def bench_sweep(robot, count: int, seed: int = 2027) -> list[dict[str, Any]]:
+    """Random states (30 % up to 10 % of the range outside the limits, half moving) and targets, 3 steps each."""
+    from taplan.ik import Kinematics
+    from taplan.ik.limits import capsule_pair_distance
+
+    lim = robot.planning_limits
+    pairs = robot.capsule_pairs("left", "right")
+    kin = Kinematics(robot.model)
+    span = lim.upper - lim.lower
+    rows = []
+    for dt in (0.01, 0.002):
+        rng = np.random.default_rng(seed)
+        ik = DifferentialIK(robot, dt, collision_margin=SWEEP_MARGIN)
+        counts = {"exceptions": 0, "nan": 0, "velocity_violations": 0, "acceleration_violations": 0}
+        worst_margin = np.inf
+        outside = 0
+        t0 = time.perf_counter()
+        for _ in range(count // 2):
+            out_frac = 0.1 if rng.random() < 0.3 else 0.0
+            q = rng.uniform(lim.lower - out_frac * span, lim.upper + out_frac * span)
+            outside += not lim.within(q)
+            moving = rng.random() < 0.5
+            v0 = rng.uniform(-lim.velocity, lim.velocity) * rng.random() if moving else np.zeros(robot.nq)
+            targets = {f: robot.frame_pose(rng.uniform(lim.lower, lim.upper), f) for f in FRAMES if rng.random() < 0.8}
+            kin.update(q)
+            d0 = min(capsule_pair_distance(kin, a, b)[0] for a, b in pairs)
+            try:
+                ik.reset(q, v0)
+                v_prev = v0
+                for _ in range(3):
+                    out = ik.step(targets)
+                    if not (np.all(np.isfinite(out.velocity)) and np.all(np.isfinite(out.q))):
+                        counts["nan"] += 1
+                    counts["velocity_violations"] += int(np.any(np.abs(out.velocity) > lim.velocity + SWEEP_VEL_TOL))
+                    counts["acceleration_violations"] += int(
+                        np.any(np.abs(out.velocity - v_prev) > lim.acceleration * dt * (1 + SWEEP_ACC_REL_TOL))
+                    )
+                    v_prev = out.velocity
+                    if d0 >= SWEEP_MARGIN and not moving:
+                        kin.update(out.q)
+                        d = min(capsule_pair_distance(kin, a, b)[0] for a, b in pairs)
+                        worst_margin = min(worst_margin, d - SWEEP_MARGIN)
+            except Exception:  # counted, never expected
+                counts["exceptions"] += 1
+        rows.append(
+            {
+                "dt": dt,
+                "states": count // 2,
+                "steps": 3 * (count // 2),
+                "outside_limits": outside,
+                **counts,
+                "min_distance_minus_margin_m": float(worst_margin),
+                "seconds": time.perf_counter() - t0,
+            }
+        )
+    return rows
+
+
 # ----------------------------------------------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -323,15 +388,22 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     tracking = bench_tracking(robot, repeats, warmup)
     step = bench_acceleration_step(robot, duration=2.0 if args.quick else 3.0)
     converge = bench_converge(robot, 20 if args.quick else 500)
-    results = {"tracking": tracking, "acceleration_step": step, "converge": converge, "quick": args.quick}
-    md = _markdown(tracking, step, converge)
+    sweep = bench_sweep(robot, 1000 if args.quick else 10000)
+    results = {
+        "tracking": tracking,
+        "acceleration_step": step,
+        "converge": converge,
+        "sweep": sweep,
+        "quick": args.quick,
+    }
+    md = _markdown(tracking, step, converge, sweep)
     if not args.no_save:
         _harness.save("ik", results, md)
     print(md)
     return results
 
 
-def _markdown(tracking, step, converge) -> str:
+def _markdown(tracking, step, converge, sweep) -> str:
     lines = ["## Differential IK: taplan vs mink and pink (TeleAvatar, 14 DOF)", ""]
     lines.append(
         f"Both end effectors track {RADIUS * 100:.0f} cm circles at {FREQUENCY} Hz; posture cost {POSTURE_COST}, "
@@ -393,6 +465,44 @@ def _markdown(tracking, step, converge) -> str:
     lines += [
         "",
         "Goal (>= 99.5 % success, fewer median iterations than mink and pink): " + ("met" if ok else "NOT met"),
+        "",
+    ]
+    lines.append("### Seeded sweep (random states and targets, 3 steps each)")
+    lines.append("")
+    lines.append(
+        "States: 30 % drawn up to 10 % of the range outside the position limits, half with a random previous velocity "
+        f"within the limits; random targets for each hand (80 %). Distance checked for states starting at rest at "
+        f"least {SWEEP_MARGIN * 1e3:.0f} mm apart (tolerance {SWEEP_DIST_TOL * 1e3:.1f} mm of linearisation error)."
+    )
+    lines.append("")
+    header = ["dt [s]", "states", "steps", "outside limits", "exceptions", "NaN", "velocity viol.", "accel. viol."]
+    header.append("min distance - margin [mm]")
+    rows = [
+        [
+            r["dt"],
+            r["states"],
+            r["steps"],
+            r["outside_limits"],
+            r["exceptions"],
+            r["nan"],
+            r["velocity_violations"],
+            r["acceleration_violations"],
+            1e3 * r["min_distance_minus_margin_m"],
+        ]
+        for r in sweep
+    ]
+    lines.append(_harness.markdown_table(header, rows))
+    total = sum(r["states"] for r in sweep)
+    ok = all(
+        r["exceptions"] == r["nan"] == r["velocity_violations"] == r["acceleration_violations"] == 0
+        and r["min_distance_minus_margin_m"] >= -SWEEP_DIST_TOL
+        for r in sweep
+    )
+    lines += [
+        "",
+        "Goal (>= 10,000 states: no exceptions, NaN or limit violations, margin kept): "
+        + ("met" if ok and total >= 10000 else "NOT met")
+        + f" ({total} states)",
     ]
     return "\n".join(lines)
 

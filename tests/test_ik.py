@@ -373,3 +373,27 @@ def test_solve_pose_reports_unreachable_honestly(robot):
     assert not res.success
     assert res.position_error["left_ee"] > 0.5
     assert res.iterations > 0
+
+
+# ------------------------------------------------------------------------------------------------------- shortcut
+def test_shortcut_equals_the_qp_solution(robot):
+    """Skipping the QP when the unconstrained minimiser is feasible gives the QP's own answer (it is exact)."""
+    from taplan.ik import get_solver
+
+    class Always(taplan.ik.QPSolver):  # a custom backend: never skipped
+        name = "always"
+
+        def __init__(self):
+            self.inner = get_solver("proxqp")
+
+        def solve(self, problem):
+            return self.inner.solve(problem)
+
+    fast = DifferentialIK(robot, dt=DT)
+    slow = DifferentialIK(robot, dt=DT, solver=Always())
+    for k in range(60):
+        targets = {f: _shifted(robot, robot.home, f, [0.0, 0.03 * np.sin(0.1 * k), 0.02]) for f in ("left_ee",)}
+        a, b = fast.step(targets), slow.step(targets)
+        np.testing.assert_allclose(a.velocity, b.velocity, atol=1e-7)  # [rad/s], proxqp's tolerance
+    assert slow.qp_solves == 60
+    assert fast.qp_solves < 60  # the shortcut was taken
