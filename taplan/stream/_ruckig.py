@@ -95,8 +95,11 @@ class RuckigAdapter:
         self._lo = (lower - tolerance).tolist()
         self._hi = (upper + tolerance).tolist()
 
-    def leaves_bounds(self, joints: Iterable[int] | None = None) -> bool:
+    def leaves_bounds(self, joints: Iterable[int] | None = None, *, check_end: bool = True) -> bool:
         """True when the new trajectory goes beyond the bounds set by :meth:`set_bounds` (for ``joints``; all).
+
+        ``check_end=False`` skips the end state, for a position target at rest inside the bounds: every joint ends
+        and stays on it (a moving target's early joints coast on past their profile, which only the end shows).
 
         ruckig's ``position_extrema`` misses an extremum inside a constant-acceleration segment (it looks for interior
         extrema only where the jerk is non-zero) and omits the straight tail of joints that arrive early without
@@ -107,14 +110,13 @@ class RuckigAdapter:
         """
         trajectory = self.out.trajectory
         lo, hi = self._lo, self._hi
-        end = trajectory.at_time(trajectory.duration)[0]
+        end = trajectory.at_time(trajectory.duration)[0] if check_end else None
         extrema = trajectory.position_extrema
         first_time = trajectory.get_first_time_at_position
         suspects = []
         for i in self._range if joints is None else joints:
             low, high = lo[i], hi[i]
-            e = end[i]
-            if e < low or e > high:
+            if end is not None and not low <= end[i] <= high:
                 return True  # the end state is exact
             bound = extrema[i]
             if bound.min < low or bound.max > high or first_time(i, low) is not None or first_time(i, high) is not None:

@@ -353,7 +353,8 @@ class JointStreamer:
             result = self._brake_now()
         out = adapter.out
         new_calculation = out.new_calculation
-        if new_calculation and adapter.leaves_bounds():
+        # a new target at rest ends inside the bounds (admitted there): its end state needs no check
+        if new_calculation and adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
             result = self._fallback(result)
         position = np.array(out.new_position)
         velocity = np.array(out.new_velocity)
