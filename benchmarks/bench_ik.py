@@ -332,6 +332,7 @@ def bench_sweep(robot, count: int, seed: int = 2027) -> list[dict[str, Any]]:
         counts = {"exceptions": 0, "nan": 0, "velocity_violations": 0, "acceleration_violations": 0}
         worst_margin = np.inf
         outside = 0
+        errors: list[str] = []
         t0 = time.perf_counter()
         for _ in range(count // 2):
             out_frac = 0.1 if rng.random() < 0.3 else 0.0
@@ -358,8 +359,9 @@ def bench_sweep(robot, count: int, seed: int = 2027) -> list[dict[str, Any]]:
                         kin.update(out.q)
                         d = min(capsule_pair_distance(kin, a, b)[0] for a, b in pairs)
                         worst_margin = min(worst_margin, d - SWEEP_MARGIN)
-            except Exception:  # counted, never expected
+            except Exception as exc:  # counted, never expected
                 counts["exceptions"] += 1
+                errors.append(repr(exc)[:300])
         rows.append(
             {
                 "dt": dt,
@@ -369,6 +371,7 @@ def bench_sweep(robot, count: int, seed: int = 2027) -> list[dict[str, Any]]:
                 **counts,
                 "min_distance_minus_margin_m": float(worst_margin),
                 "seconds": time.perf_counter() - t0,
+                "errors": errors[:5],
             }
         )
     return rows
