@@ -19,6 +19,7 @@ Safety: with no new target for ``timeout`` [s] the streamer brakes to rest along
 from __future__ import annotations
 
 import logging
+import math
 from typing import Literal
 
 import numpy as np
@@ -105,7 +106,7 @@ class JointStreamer:
         self._lower_list = self._lower.tolist()
         self._upper_list = self._upper.tolist()
         self._vmax_list = self._vmax.tolist()
-        self._inner_lower, self._inner_upper = _braking_box(limits, self.dt)
+        self._speed_rows = _speed_rows(limits, self.dt)
         self._shape = (self.n,)
         self._state: StreamState | None = None
         self._time = 0.0
@@ -256,7 +257,7 @@ class JointStreamer:
                     return self._admit(q, self._zero_list, None, False, False)
             elif type(velocities) is np.ndarray and velocities.shape == self._shape and velocities.dtype.kind == "f":
                 v = velocities.tolist()
-                if _inside(q, self._inner_lower, self._inner_upper) and _within_speed(v, self._vmax_list):
+                if _admissible(q, v, self._speed_rows):
                     return self._admit(q, v, v, any(v), False)
         return self._set_target_checked(positions, velocities)
 
@@ -292,13 +293,15 @@ class JointStreamer:
         if velocities is not None:
             room = np.where(v >= 0.0, self._upper - q_admitted, q_admitted - self._lower)
             # ruckig reports a moving target as reached up to one period late, having coasted on at the target
-            # velocity: the braking stop must fit in the room left after that (v1 fits the room, v2 <= v1 fits
-            # room - v1 dt, hence d(v2) + v2 dt <= room)
-            v1 = max_safe_velocity(room, self._amax, self._jmax)
-            v2 = max_safe_velocity(room - v1 * self.dt, self._amax, self._jmax)
-            speed_cap = np.minimum(self._vmax, v2 * _SPEED_MARGIN)
-            fast = np.abs(v) > speed_cap
+            # velocity: the braking stop must fit in the room left after that, d(|v|) + |v| dt <= room
+            speed = np.abs(v)
+            need = braking_distance(speed, self._amax, self._jmax) + speed * self.dt
+            fast = (speed > self._vmax) | (need > room * _SPEED_MARGIN)
             if np.any(fast):
+                # the cap: v1 fits the room, v2 <= v1 fits room - v1 dt, hence d(v2) + v2 dt <= room
+                v1 = max_safe_velocity(room, self._amax, self._jmax)
+                v2 = max_safe_velocity(room - v1 * self.dt, self._amax, self._jmax)
+                speed_cap = np.where(fast, np.minimum(self._vmax, v2 * _SPEED_MARGIN), speed)
                 if raising:
                     i = int(np.flatnonzero(fast)[0])
                     raise StreamError(
@@ -429,36 +432,41 @@ def _inside(values: list[float], lower: list[float], upper: list[float]) -> bool
     return True
 
 
-def _within_speed(values: list[float], limit: list[float]) -> bool:
-    """``|values| <= limit`` elementwise (False for NaN)."""
-    for x, high in zip(values, limit, strict=True):  # noqa: SIM110
-        if not -high <= x <= high:
+def _speed_rows(limits: JointLimits, dt: float) -> list[tuple[float, ...]]:
+    """Per joint, what :func:`_admissible` needs: an inner box, the bounds, the stop-distance bound and the limit.
+
+    The stop after a target is reached with speed ``w`` covers at most ``d(w) + w dt <= w (k1 + w k2)`` with
+    ``k1 = a / (2 j) + dt`` and ``k2 = 1 / (2 a)`` (the trapezoidal formula of :func:`braking_distance`, an upper
+    bound in the triangular regime too, by AM-GM). Inside ``[lower + R, upper - R]`` with ``R`` that bound at the
+    velocity limit (empty when the range is too short) any admissible speed fits.
+    """
+    rows = []
+    for low, high, vmax, amax, jmax in zip(
+        limits.lower.tolist(),
+        limits.upper.tolist(),
+        limits.velocity.tolist(),
+        limits.acceleration.tolist(),
+        limits.jerk.tolist(),
+        strict=True,
+    ):
+        k1, k2 = amax / (2.0 * jmax) + dt, 1.0 / (2.0 * amax)
+        reach = vmax * (k1 + vmax * k2) / _SPEED_MARGIN * (1.0 + 1e-9)
+        inner = (low + reach, high - reach) if 2.0 * reach < high - low else (math.inf, -math.inf)
+        rows.append((inner[0], inner[1], low, high, k1, k2, vmax))
+    return rows
+
+
+def _admissible(q: list[float], v: list[float], rows: list[tuple[float, ...]]) -> bool:
+    """Target positions inside the bounds and speeds within the limit whose stop fits (False for NaN, or unsure)."""
+    for x, w, (inner_low, inner_high, low, high, k1, k2, vmax) in zip(q, v, rows, strict=True):
+        if inner_low <= x <= inner_high and -vmax <= w <= vmax:
+            continue
+        if w >= 0.0:
+            if not (w <= vmax and low <= x and w * (k1 + w * k2) <= (high - x) * _SPEED_MARGIN):
+                return False
+        elif not (-w <= vmax and x <= high and -w * (k1 - w * k2) <= (x - low) * _SPEED_MARGIN):
             return False
     return True
-
-
-def _braking_box(limits: JointLimits, dt: float) -> tuple[list[float], list[float]]:
-    """Positions [rad] from which ``set_target``'s speed cap cannot bind: any speed up to the limit is admitted.
-
-    Inside ``[lower + R, upper - R]`` every room is at least ``R``, where ``R`` solves ``R - v1(R) dt = d(w)``
-    (``v1`` = :func:`max_safe_velocity`, ``d`` = :func:`braking_distance`, ``w`` = the velocity limit over the speed
-    margin): the exact cap ``v2 = v1(R - v1(R) dt)`` is then at least ``w``, and it grows with the room while
-    ``d'(v) > dt`` at ``v >= w`` (checked; joints where it fails get an empty box and always take the exact path).
-    """
-    vmax, amax, jmax = limits.velocity, limits.acceleration, limits.jerk
-    w = vmax / _SPEED_MARGIN * (1.0 + 1e-9)
-    d_w = braking_distance(w, amax, jmax)
-    room = d_w.copy()
-    for _ in range(100):  # a contraction (factor dt / d'(v1) < 1), from below
-        room = d_w + dt * max_safe_velocity(room, amax, jmax)
-    room *= 1.0 + 1e-6
-    v1 = max_safe_velocity(room, amax, jmax)
-    v2 = max_safe_velocity(room - v1 * dt, amax, jmax)
-    slope = np.where(w <= amax * amax / jmax, 1.5 * np.sqrt(w / jmax), 0.5 * amax / jmax + w / amax)  # d'(w)
-    ok = (v2 >= w) & (slope > dt) & (2.0 * room < limits.upper - limits.lower)
-    lower = np.where(ok, limits.lower + room, np.inf)
-    upper = np.where(ok, limits.upper - room, -np.inf)
-    return lower.tolist(), upper.tolist()
 
 
 def _target_vector(value: npt.ArrayLike, name: str, size: int) -> np.ndarray:

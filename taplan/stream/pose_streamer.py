@@ -12,9 +12,11 @@ target raises :class:`~taplan.StreamError` and changes nothing.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping, Sequence
-from typing import Any, NamedTuple
+from operator import mul, sub
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -65,8 +67,29 @@ class PoseStreamState(NamedTuple):
         return self.pose_reached and self.status in (StreamStatus.REACHED, StreamStatus.IDLE)
 
 
+_DEFAULT_POSTURE_COST = 1e-4  # [1/rad]: see PoseStreamer (the IK's own default, 1e-2, stops ~6 mm short)
+_SETTLE_SPEED = 1e-3  # [rad]/[s]: an IK step slower than this on a reached pose holds the joints at rest
+
+
 class PoseStreamer:
     """Streams end-effector pose targets (``{frame: T_root_frame}``) as joint commands at period ``dt``.
+
+    Each ``step`` runs one IK step toward the latest targets (while targets are live) and gives the IK's next
+    configuration and velocity to a :class:`~taplan.stream.JointStreamer`. Once every pose is within ``tolerance``
+    and the IK has come to rest (slower than 1e-3 [rad]/[s]), the joint streamer is given that configuration as a
+    target at rest: the stream reports ``reached`` and skips the IK until a target changes (re-sending the same
+    targets keeps the hold).
+
+    IK options: the posture task (pull toward the configuration at ``reset``) keeps redundant arms near a known
+    posture but biases the solution: with the IK's own default cost, 1e-2 per [rad], the hand settles about 6 [mm]
+    from a small reachable offset, outside the default 1 [mm] tolerance. The pose streamer therefore defaults to
+    ``posture_cost=1e-4``, which settles within 1e-7 [m] of reachable targets and still removes the arms' null-space
+    drift; pass ``posture_cost`` to override it. Arm-arm collision avoidance stays on by default.
+
+    Reachability: a frame is reported in ``unreachable`` when it is outside the tolerance and, over ``stall_time``,
+    neither its error improved by a tenth of the tolerance nor the joints that move it travelled ``stall_motion``:
+    the IK has stopped at the closest configuration the limits (joint bounds, speed, arm-arm clearance) allow. A
+    detour (the error grows while the arm swings around a joint limit) is not a stall.
 
     Args:
         robot: The robot (poses are ``T_root_frame`` in its root frame, e.g. ``shoulder_base``).
@@ -75,9 +98,13 @@ class PoseStreamer:
         limits: Joint limits over all the robot's joints; default ``robot.planning_limits``.
         timeout: Longest time without a pose target [s] before braking to rest; None disables it.
         tolerance: ``(position [m], orientation [rad])`` within which a pose counts as reached.
-        stall_time: A pose outside the tolerance whose error has not dropped by 10 % of the tolerance over this
-            long [s] is reported unreachable (the IK makes no more progress toward it).
+        stall_time: Window [s] of the unreachable test above.
+        stall_motion: Joint travel [rad] over ``stall_time`` below which the IK counts as stopped.
+        synchronization: The joint streamer's ruckig synchronisation. Default ``"none"``: every joint tracks its own
+            IK reference (position and velocity, renewed each period) time-optimally; the IK already coordinates
+            the joints, and ruckig's time synchronisation would cost twice as much per period for no benefit.
         ik: A ready :class:`~taplan.ik.DifferentialIK` (same ``dt``, frames and limits) instead of building one.
+        initial: Optional initial configuration [rad] (nq,): calls ``reset(initial)``.
         **ik_options: Passed to :class:`~taplan.ik.DifferentialIK` (``solver``, ``collision``, ``posture_cost``...).
     """
 
@@ -91,6 +118,8 @@ class PoseStreamer:
         timeout: float | None = 1.0,
         tolerance: tuple[float, float] = (1e-3, 1e-2),
         stall_time: float = 0.25,
+        stall_motion: float = 0.02,
+        synchronization: Literal["time", "phase", "none"] = "none",
         ik: DifferentialIK | None = None,
         initial: npt.ArrayLike | None = None,
         **ik_options: Any,
@@ -99,20 +128,30 @@ class PoseStreamer:
         self.dt = as_positive(dt, "dt")
         limits = robot.planning_limits if limits is None else limits
         if ik is None:
+            ik_options.setdefault("posture_cost", _DEFAULT_POSTURE_COST)
             ik = DifferentialIK(robot, dt=self.dt, limits=limits, frames=tuple(frames), **ik_options)
         elif abs(ik.dt - self.dt) > 1e-12:
             raise InvalidInputError("ik.dt", ik.dt, f"the streamer's dt {self.dt}")
         self.ik = ik
         self.frames = ik.frames
         self.tolerance = (as_positive(tolerance[0], "tolerance[0]"), as_positive(tolerance[1], "tolerance[1]"))
+        self.stall_motion = as_positive(stall_motion, "stall_motion")
         self._window = max(2, round(as_positive(stall_time, "stall_time") / self.dt))
-        self._scores: dict[str, deque[float]] = {f: deque(maxlen=self._window) for f in self.frames}
-        self._targets: dict[str, np.ndarray] = {}
-        self.joints = JointStreamer(limits, self.dt, timeout=None, on_out_of_bounds="clamp")
+        model = robot.model
+        self._frame_ids = {f: robot.frame_id(f) for f in self.frames}
+        self._frame_joints = {f: _index(_supporting_joints(model, fid)) for f, fid in self._frame_ids.items()}
+        # per frame: (score, positions of the joints that move it) over the last `window` steps
+        self._history: dict[str, deque[tuple[float, list[float]]]] = {
+            f: deque(maxlen=self._window) for f in self.frames
+        }
+        # per frame: target position [m] (3 floats), rotation (9 floats, row-major) and top 3 rows of the 4x4
+        self._targets: dict[str, tuple[list[float], list[float], list[float]]] = {}
+        self.joints = JointStreamer(
+            limits, self.dt, timeout=None, on_out_of_bounds="clamp", synchronization=synchronization
+        )
         self._watchdog = Watchdog(None if timeout is None else as_positive(timeout, "timeout"))
         self._active = False
-        self._last_reference: np.ndarray | None = None
-        self._ik_speed = 0.0
+        self._holding = False
         if initial is not None:
             self.reset(initial)
 
@@ -123,6 +162,7 @@ class PoseStreamer:
 
     @property
     def limits(self) -> JointLimits:
+        """The joint limits the commands respect."""
         return self.joints.limits
 
     def reset(self, position: npt.ArrayLike, velocity: npt.ArrayLike | None = None) -> StreamState:
@@ -131,10 +171,9 @@ class PoseStreamer:
         self.ik.reset(state.position, state.velocity)
         self._watchdog.clear()
         self._active = False
-        self._last_reference = None
-        self._ik_speed = 0.0
-        for scores in self._scores.values():
-            scores.clear()
+        self._holding = False
+        for history in self._history.values():
+            history.clear()
         self._targets.clear()
         return state
 
@@ -146,32 +185,46 @@ class PoseStreamer:
         Raises:
             StreamError: Unknown frame, wrong shape, NaN/inf or a non-rotation; nothing changes.
         """
-        if not isinstance(targets, Mapping) or not targets:
+        if not (type(targets) is dict or isinstance(targets, Mapping)) or not targets:
             raise StreamError(f"pose targets: expected a non-empty mapping {{frame: pose}}, received {targets!r:.80}")
-        checked = {}
+        checked = []
         for frame, pose in targets.items():
-            if frame not in self.ik.tasks:
+            if frame not in self._frame_ids:
                 raise StreamError(f"{UnknownNameError('task frame', frame, self.frames)}; the target was rejected")
-            try:
-                checked[frame] = as_transform(pose, f"targets[{frame!r}]")
-            except InvalidInputError as exc:
-                raise StreamError(f"{exc}; the target was rejected and the stream keeps its last good motion") from None
+            flat = _fast_transform(pose)
+            if flat is None:
+                try:
+                    T = as_transform(pose, f"targets[{frame!r}]")
+                except InvalidInputError as exc:
+                    raise StreamError(
+                        f"{exc}; the target was rejected and the stream keeps its last good motion"
+                    ) from None
+                flat = T[:3].ravel().tolist()
+            else:
+                T = pose.copy()
+            checked.append((frame, T, flat))
         self.joints.state  # noqa: B018 (raises before reset)
-        for frame, T in checked.items():  # a target that moved restarts its progress window
-            previous = self._targets.get(frame)
-            if previous is None or np.abs(T - previous).max() > 0.1 * self.tolerance[0]:
-                self._scores[frame].clear()
-            self._targets[frame] = T
+        tol_p = 0.1 * self.tolerance[0]
+        stored = self._targets
+        for frame, _, flat in checked:
+            previous = stored.get(frame)
+            if previous is None or flat != previous[2]:
+                self._holding = False  # any change resumes tracking
+                if previous is None or max(map(abs, map(sub, flat, previous[2]))) > tol_p:
+                    self._history[frame].clear()  # a target that moved restarts its progress window
+            stored[frame] = ([flat[3], flat[7], flat[11]], flat[0:3] + flat[4:7] + flat[8:11], flat)
         if not self._active:  # resume from where the joint stream is, with its velocity (acceleration limit state)
             state = self.joints.state
             self.ik.reset(state.position, state.velocity)
-        self.ik.set_targets(checked)
+            self._holding = False
+        self.ik.set_targets({frame: T for frame, T, _ in checked})
         self._active = True
         self._watchdog.feed(self.joints.time)
 
     def stop(self) -> None:
         """Brake smoothly to rest; the next pose target resumes."""
         self._active = False
+        self._holding = False
         self.joints.stop()
 
     def step(self) -> PoseStreamState:
@@ -179,36 +232,97 @@ class PoseStreamer:
         joints = self.joints
         if self._active and self._watchdog.expired(joints.time):
             self.stop()
-        if self._active:
+        ik_velocity = None
+        if self._active and not self._holding:  # holding a reached pose: nothing to solve until a target changes
             out = self.ik.step()
-            reference = out.q
-            self._ik_speed = float(np.max(np.abs(out.velocity)))
-            last = self._last_reference
-            if last is None or self._ik_speed > 0.0 or not np.array_equal(reference, last):
-                joints.set_target(reference, out.velocity)
-                self._last_reference = reference
-        state = joints.step()
+            ik_velocity = out.velocity
+            joints.set_target(out.q, ik_velocity)
+        # errors at the IK step's start configuration (its kinematics are evaluated there; while holding, at the
+        # held configuration)
+        oMf = self.ik.kin.data.oMf
+        tol_p, tol_r = self.tolerance
         position_error: dict[str, float] = {}
         orientation_error: dict[str, float] = {}
-        unreachable: list[str] = []
-        kin = self.ik.kin  # at the IK step's start configuration
-        tol_p, tol_r = self.tolerance
-        for frame, task in self.ik.tasks.items():
-            error = task.compute_error(kin)
-            e_p = float(np.linalg.norm(error[:3]))
-            e_r = float(np.linalg.norm(error[3:]))
+        pose_reached = True
+        for frame, (p_target, R_target, _) in self._targets.items():
+            r0, r1, r2, _ = oMf[self._frame_ids[frame]].homogeneous.tolist()
+            e_p = math.dist((r0[3], r1[3], r2[3]), p_target)
+            # trace(R R*^T) = sum of elementwise products = 1 + 2 cos(angle) (acos resolves ~1e-8 [rad] near 0)
+            cosine = 0.5 * (sum(map(mul, r0[:3] + r1[:3] + r2[:3], R_target)) - 1.0)
+            e_r = math.acos(min(1.0, max(-1.0, cosine)))
             position_error[frame] = e_p
             orientation_error[frame] = e_r
-            score = max(e_p / tol_p, e_r / tol_r)  # > 1: outside the tolerance
-            scores = self._scores[frame]
-            scores.append(score)
-            if self._active and score > 1.0 and len(scores) == self._window and scores[0] - score < 0.1:
-                unreachable.append(frame)
-        pose_reached = all(position_error[f] <= tol_p and orientation_error[f] <= tol_r for f in position_error)
-        return PoseStreamState(
-            *state,
-            position_error,
-            orientation_error,
-            pose_reached,
-            tuple(unreachable),
-        )
+            if e_p > tol_p or e_r > tol_r:
+                pose_reached = False
+        unreachable: tuple[str, ...] = ()
+        if self._active and not pose_reached:
+            unreachable = self._stalled(position_error, orientation_error)
+        if (
+            self._active
+            and not self._holding
+            and pose_reached
+            and self._targets
+            and ik_velocity is not None
+            and not np.any(np.abs(ik_velocity) > _SETTLE_SPEED)
+        ):
+            joints.set_target(self.ik.kin.q)  # hold the reached configuration at rest
+            self._holding = True
+        state = joints.step()
+        return PoseStreamState(*state, position_error, orientation_error, pose_reached, unreachable)
+
+    def _stalled(self, position_error: dict[str, float], orientation_error: dict[str, float]) -> tuple[str, ...]:
+        """Frames outside the tolerance whose error and joints have not moved over the stall window."""
+        tol_p, tol_r = self.tolerance
+        q = self.ik.kin.q
+        stalled = []
+        for frame, e_p in position_error.items():
+            score = max(e_p / tol_p, orientation_error[frame] / tol_r)  # > 1: outside the tolerance
+            history = self._history[frame]
+            joints_q = q[self._frame_joints[frame]].tolist()
+            history.append((score, joints_q))
+            if score <= 1.0 or len(history) < self._window:
+                continue
+            first_score, first_q = history[0]
+            if first_score - score < 0.1 and max(map(abs, map(sub, joints_q, first_q))) < self.stall_motion:
+                stalled.append(frame)
+        return tuple(stalled)
+
+
+def _index(indices: np.ndarray) -> np.ndarray | slice:
+    """A slice for contiguous indices (a view, cheaper than fancy indexing), else the indices."""
+    if indices.size and np.array_equal(indices, np.arange(indices[0], indices[0] + indices.size)):
+        return slice(int(indices[0]), int(indices[0]) + indices.size)
+    return indices
+
+
+def _supporting_joints(model: Any, frame_id: int) -> np.ndarray:
+    """Configuration indices (1-DoF joints) of the joints that move a frame."""
+    joint = model.frames[frame_id].parentJoint
+    return np.array([model.joints[j].idx_q for j in model.supports[joint] if j > 0], dtype=int)
+
+
+def _fast_transform(pose: Any) -> list[float] | None:
+    """The top 3 rows (12 floats) of a float 4x4 proper rigid transform; None when it needs the full check.
+
+    One ``tolist`` and plain float arithmetic: finiteness (the sum of finite floats is finite), the last row, an
+    orthonormal rotation (row products within 1e-6, as :func:`~taplan.ik._targets.as_transform`) and det > 0.
+    """
+    if type(pose) is not np.ndarray or pose.shape != (4, 4) or pose.dtype != np.float64:
+        return None
+    r0, r1, r2, last = pose.tolist()
+    if not math.isfinite(sum(r0) + sum(r1) + sum(r2)) or last != [0.0, 0.0, 0.0, 1.0]:
+        return None
+    a, b, c = r0[0], r0[1], r0[2]
+    d, e, f = r1[0], r1[1], r1[2]
+    g, h, i = r2[0], r2[1], r2[2]
+    if (
+        abs(a * a + b * b + c * c - 1.0) > 1e-6
+        or abs(d * d + e * e + f * f - 1.0) > 1e-6
+        or abs(g * g + h * h + i * i - 1.0) > 1e-6
+        or abs(a * d + b * e + c * f) > 1e-6
+        or abs(a * g + b * h + c * i) > 1e-6
+        or abs(d * g + e * h + f * i) > 1e-6
+        or a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) <= 0.0
+    ):
+        return None
+    return r0 + r1 + r2
