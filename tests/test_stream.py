@@ -153,6 +153,25 @@ def test_reset_validates_measured_state(limits, teleavatar):
     assert states[-1].status is StreamStatus.STOPPED
 
 
+def test_fast_and_checked_admission_agree(limits, teleavatar, rng):
+    """Float arrays take set_target's fast path, lists the general one: same admitted targets and flags."""
+    fast = JointStreamer(limits, DT, initial=teleavatar.home)
+    checked = JointStreamer(limits, DT, initial=teleavatar.home)
+    span = limits.upper - limits.lower
+    for _ in range(300):
+        q = rng.uniform(limits.lower - 0.02 * span, limits.upper + 0.02 * span)
+        if rng.random() < 0.5:  # close to a bound, where the braking room binds
+            q = np.where(rng.random(q.size) < 0.5, limits.lower, limits.upper) + rng.normal(0.0, 0.05, q.size)
+        v = None if rng.random() < 0.3 else rng.uniform(-1.0, 1.0, q.size) * limits.velocity * rng.uniform(0, 1.1)
+        assert fast.set_target(q, v) == checked.set_target(q.tolist(), None if v is None else v.tolist())
+        for a, b in zip(fast.target, checked.target, strict=True):
+            np.testing.assert_array_equal(a, b)
+        q_admitted, v_admitted = fast.target
+        room = np.where(v_admitted >= 0, limits.upper - q_admitted, q_admitted - limits.lower)
+        stop = braking_distance(v_admitted, limits.acceleration, limits.jerk) + np.abs(v_admitted) * DT
+        assert np.all(stop <= room + 1e-12)
+
+
 @pytest.mark.parametrize("synchronization", ["time", "phase", "none"])
 def test_seeded_sweep_no_violations(limits, synchronization):
     rng = np.random.default_rng(7)
