@@ -21,7 +21,9 @@ JOINT_GOAL_US = 20.0
 POSE_GOAL_US = 100.0
 
 
-def _timed_cycles(step, before, cycles: int, warmup: int = 50) -> dict[str, float]:
+def _timed_cycles(step, before, cycles: int, warmup: int = 50, inner: list[int] | None = None) -> dict[str, Any]:
+    """Time ``step`` after ``before(k)``; with ``inner`` (nanoseconds appended by a timed part of the step, once
+    per cycle), also summarise that part and the rest of the cycle."""
     clock = time.perf_counter_ns
     samples = np.empty(cycles)
     for k in range(warmup + cycles):
@@ -30,7 +32,14 @@ def _timed_cycles(step, before, cycles: int, warmup: int = 50) -> dict[str, floa
         step()
         if k >= warmup:
             samples[k - warmup] = clock() - start
-    return _harness.summarize(samples / 1e3)
+    out = _harness.summarize(samples / 1e3)
+    if inner is not None:
+        if len(inner) != warmup + cycles:
+            raise RuntimeError(f"the timed part ran {len(inner)} times in {warmup + cycles} cycles")
+        part = np.array(inner[warmup:], dtype=float)
+        out["ik_step"] = _harness.summarize(part / 1e3)
+        out["streamer_overhead"] = _harness.summarize((samples - part) / 1e3)
+    return out
 
 
 class _TargetStream:
@@ -58,8 +67,13 @@ def joint_cycles(robot: taplan.Robot, cycles: int, seed: int = 1) -> dict[str, d
     limits = robot.planning_limits
     rng = np.random.default_rng(seed)
     out = {}
-    for name, every in (("steady (no new target)", 0), ("policy targets at ~26 Hz", 3), ("VR targets every cycle", 1)):
-        streamer = JointStreamer(limits, 1 / RATE, timeout=None, initial=robot.home)
+    for name, every, sync in (
+        ("steady (no new target)", 0, "time"),
+        ("policy targets at ~26 Hz", 3, "time"),
+        ("VR targets every cycle", 1, "time"),
+        ("VR targets every cycle, synchronization none", 1, "none"),
+    ):
+        streamer = JointStreamer(limits, 1 / RATE, timeout=None, initial=robot.home, synchronization=sync)
         if every == 0:  # one far target: the whole run follows one trajectory
             streamer.set_target(np.where(robot.home > 0.5 * (limits.lower + limits.upper), limits.lower, limits.upper))
         stream = _TargetStream(streamer, every, rng, robot.home)
@@ -78,17 +92,31 @@ def pose_cycles(robot: taplan.Robot, cycles: int) -> dict[str, dict[str, float]]
         ("IK daqp, collision off", {"collision": False, "solver": "daqp"}),
     ):
         streamer = PoseStreamer(robot, 1 / RATE, timeout=None, initial=q0, **options)
+        ik_times: list[int] = []
+        ik_step = streamer.ik.step
 
-        def mark(k: int, streamer=streamer) -> None:
+        def timed_ik_step(ik_step=ik_step, ik_times=ik_times):
+            start = time.perf_counter_ns()
+            result = ik_step()
+            ik_times.append(time.perf_counter_ns() - start)
+            return result
+
+        streamer.ik.step = timed_ik_step  # the streamer calls it once per cycle while targets are live
+
+        latest: dict[str, np.ndarray] = {}
+
+        def mark(k: int, latest=latest) -> None:  # the client's side: a new pair of poses (untimed)
             phase = 2 * np.pi * k / RATE / 2.0  # a 2 s circle of 3 cm radius per hand
-            targets = {}
             for frame, T in T0.items():
                 Tk = T.copy()
                 Tk[:3, 3] += 0.03 * np.array([np.cos(phase) - 1.0, np.sin(phase), 0.0])
-                targets[frame] = Tk
-            streamer.set_target(targets)
+                latest[frame] = Tk
 
-        out[name] = _timed_cycles(streamer.step, mark, cycles, warmup=20)
+        def cycle(streamer=streamer, latest=latest) -> None:  # timed: set_target + step
+            streamer.set_target(latest)
+            streamer.step()
+
+        out[name] = _timed_cycles(cycle, mark, cycles, warmup=20, inner=ik_times)
     return out
 
 
@@ -143,6 +171,19 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             ok = "yes" if stats["median_us"] <= goal else "no"
             rows.append([group, scenario, stats["median_us"], stats["p99_us"], goal, ok])
     table = _harness.markdown_table(["streamer", "scenario", "median [µs]", "p99 [µs]", "goal [µs]", "met"], rows)
+    split = _harness.markdown_table(
+        ["scenario", "cycle median [µs]", "IK step median [µs]", "streamer overhead median [µs]", "overhead p99 [µs]"],
+        [
+            [
+                scenario,
+                stats["median_us"],
+                stats["ik_step"]["median_us"],
+                stats["streamer_overhead"]["median_us"],
+                stats["streamer_overhead"]["p99_us"],
+            ]
+            for scenario, stats in results["pose_streamer_dual_arm"].items()
+        ],
+    )
     sw = results["sweep"]
     total_violations = sum(sw["violations"].values())
     joint_ok = all(s["median_us"] <= JOINT_GOAL_US for s in results["joint_streamer_14"].values())
@@ -153,9 +194,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             "",
             f"Per-cycle time at {RATE:g} Hz: `JointStreamer` (ruckig online, 14 joints, planning limits) for three "
             "target streams, and the dual-arm `PoseStreamer` (one DifferentialIK QP step + the joint streamer) with "
-            "a new pose target every cycle. Times include `set_target` when a target arrives.",
+            "a new pose target every cycle (a 3 cm circle per hand). Times include `set_target` when a target arrives.",
             "",
             table,
+            "",
+            "Pose streamer cycle split: the DifferentialIK QP step (`taplan.ik`) and the rest (pose validation, "
+            "errors, the joint streamer's ruckig update with its exact bound check):",
+            "",
+            split,
             "",
             f"Sweep: {sw['sequences']} seeded 3 s target streams (VR / policy / human clicking, jitter, dropouts "
             f"beyond the 1 s watchdog, targets outside the bounds, target velocities, NaN/short targets): "
