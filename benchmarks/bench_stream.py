@@ -187,6 +187,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     sw = results["sweep"]
     total_violations = sum(sw["violations"].values())
     joint_ok = all(s["median_us"] <= JOINT_GOAL_US for s in results["joint_streamer_14"].values())
+    default = next(iter(results["pose_streamer_dual_arm"].values()))
     pose_ok = any(s["median_us"] <= POSE_GOAL_US for s in results["pose_streamer_dual_arm"].values())
     md = "\n".join(
         [
@@ -210,8 +211,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             f"({sw['seconds']:.1f} s).",
             "",
             f"Goals: joint streamer <= {JOINT_GOAL_US:g} µs median: {'met' if joint_ok else 'not met'}; dual-arm "
-            f"pose streamer <= {POSE_GOAL_US:g} µs median: {'met' if pose_ok else 'not met'} (the IK QP step "
-            f"dominates); zero violations in the sweep: {'met' if total_violations == 0 else 'not met'}.",
+            f"pose streamer <= {POSE_GOAL_US:g} µs median: {'met' if pose_ok else 'not met'} (per cycle: IK step "
+            f"{default['ik_step']['median_us']:.0f} µs + streamer {default['streamer_overhead']['median_us']:.0f} µs, "
+            "of which ruckig's recalculation and exact bound check take about 25 µs for every new reference); "
+            "a new target every cycle costs ruckig's own recalculation, about 19 µs with time synchronisation for "
+            "14 joints on this machine (9 µs without), before any taplan code; "
+            f"zero violations in the sweep: {'met' if total_violations == 0 else 'not met'}.",
         ]
     )
     print(md)
