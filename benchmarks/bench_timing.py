@@ -22,19 +22,11 @@ import toppra.constraint
 
 import taplan
 from benchmarks import _harness
+from benchmarks._paths import random_walk
 from taplan.timing import Path, jerk_limited, retime
 
 SIZES = (10, 50, 200)
 RATE = 1000.0  # [Hz] sampling for the limit checks
-
-
-def random_walk(limits: taplan.JointLimits, count: int, seed: int, step: float = 0.4) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    mid, half = (limits.lower + limits.upper) / 2, (limits.upper - limits.lower) / 2
-    q = [mid + rng.uniform(-0.5, 0.5, limits.size) * half]
-    for _ in range(count - 1):
-        q.append(np.clip(q[-1] + rng.uniform(-step, step, limits.size), mid - 0.75 * half, mid + 0.75 * half))
-    return np.array(q)
 
 
 def _ratios(

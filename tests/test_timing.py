@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import taplan
+from benchmarks._paths import random_walk
 from taplan.errors import InvalidInputError, TimingError
 from taplan.timing import Path, jerk_limited, limit_usage, retime, sampled_limit_usage, synchronise
 
@@ -20,15 +21,6 @@ JERK_DURATION_RATIO = 1.15  # jerk-limited duration / TOPP-RA duration
 @pytest.fixture(scope="module")
 def arm_limits(teleavatar: taplan.Robot) -> taplan.JointLimits:
     return teleavatar.planning_limits.subset(teleavatar.group("left").joint_names)
-
-
-def random_walk(limits: taplan.JointLimits, count: int, seed: int, step: float = 0.4) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    mid, half = (limits.lower + limits.upper) / 2, (limits.upper - limits.lower) / 2
-    q = [mid + rng.uniform(-0.5, 0.5, limits.size) * half]
-    for _ in range(count - 1):
-        q.append(np.clip(q[-1] + rng.uniform(-step, step, limits.size), mid - 0.75 * half, mid + 0.75 * half))
-    return np.array(q)
 
 
 def single_joint_limits(velocity: float, acceleration: float) -> taplan.JointLimits:

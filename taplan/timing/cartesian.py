@@ -196,15 +196,7 @@ def line_deviation(
 
 
 def _sample_poses(robot: Robot, q: np.ndarray, fid: int) -> tuple[np.ndarray, np.ndarray]:
-    data = robot.model.createData()
-    p = np.empty((len(q), 3))
-    R = np.empty((len(q), 3, 3))
-    for k, qk in enumerate(q):
-        pin.forwardKinematics(robot.model, data, qk)
-        M = pin.updateFramePlacement(robot.model, data, fid)
-        p[k] = M.translation
-        R[k] = M.rotation
-    return p, R
+    return _sample_poses_with(robot, robot.model.createData(), q, fid)
 
 
 def _components(robot: Robot, frames: list[str], held: Mapping[str, Any]) -> list[tuple[list[str], np.ndarray]]:
