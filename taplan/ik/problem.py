@@ -171,10 +171,15 @@ class ProblemBuilder:
         self._A = np.zeros((rows, n))
         self._AT = self._A.T
         self._b = np.zeros(rows)
+        self._b_ff = np.zeros(rows)
         self._views = []
+        self._ff_views = []  # tasks that can follow a moving target (see ``Task.feedforward``)
         start = 0
         for t in self.tasks:
-            self._views.append((t.fill, self._A[start : start + t.rows], self._b[start : start + t.rows]))
+            rows_t = slice(start, start + t.rows)
+            self._views.append((t.fill, self._A[rows_t], self._b[rows_t]))
+            if hasattr(t, "feedforward"):
+                self._ff_views.append((t.feedforward, self._b_ff[rows_t], self._b[rows_t]))
             start += t.rows
         self._H = np.zeros((n, n))
         self._c = np.zeros(n)
@@ -185,10 +190,13 @@ class ProblemBuilder:
         self._v_prev = np.zeros(n)
         self._v_free = np.zeros(n)
         self._minimiser = np.zeros(n)
+        self._v_ff = np.zeros(n)
+        self._c_ff = np.zeros(n)
+        self._rhs = np.zeros((n, 2), order="F")
         max_rows = sum(lim.max_rows for lim in self.row_limits)
         self._G = np.zeros((max_rows, n))
         self._h = np.zeros(max_rows)
-        self._ctx = StepContext(kin, 0.01, self._v_prev, self._v_free)
+        self._ctx = StepContext(kin, 0.01, self._v_prev, self._v_free, self._v_ff)
         self.damping = damping
         self.problem = Problem(
             self._H,
@@ -221,6 +229,13 @@ class ProblemBuilder:
         kin.update(q)
         for fill, A, b in self._views:
             fill(kin, A, b)
+        moving = False
+        for feedforward, b_ff, b in self._ff_views:
+            code = feedforward(dt, b_ff)
+            if code:
+                moving = True
+                if code == 2:  # explicit target velocity: the step aims at where the target will be
+                    b += b_ff * dt
         H, c = self._H, self._c
         np.matmul(self._AT, self._A, out=H)
         if self._damping:
@@ -234,7 +249,14 @@ class ProblemBuilder:
         ctx = self._ctx
         ctx.dt = dt
         problem = self.problem
-        problem.minimiser_exact = _free_velocity(H, c, self._v_free)
+        ctx.moving = moving
+        if moving:  # the target-following velocity v_ff = -H⁻¹ c_ff with c_ff = -Aᵀ b_ff, same factorisation
+            c_ff = self._c_ff
+            np.matmul(self._AT, self._b_ff, out=c_ff)
+            np.negative(c_ff, out=c_ff)
+            problem.minimiser_exact = _free_velocities(H, c, c_ff, self._rhs, self._v_free, self._v_ff)
+        else:
+            problem.minimiser_exact = _free_velocity(H, c, self._v_free)
         box = self._box
         layers = problem.layers
         layers.clear()
@@ -250,7 +272,14 @@ class ProblemBuilder:
             layers.append((lim.name, new))
             scale *= lim.objective_scale
         np.negative(box[1], out=self._lower)
-        if scale != 1.0:
+        if scale != 1.0 and moving:  # scale the part relative to the target's motion: v_ff + κ (v_free - v_ff)
+            c -= self._c_ff
+            c *= scale
+            c += self._c_ff
+            np.subtract(self._v_free, self._v_ff, out=self._minimiser)
+            self._minimiser *= scale
+            self._minimiser += self._v_ff
+        elif scale != 1.0:
             c *= scale
             np.multiply(self._v_free, scale, out=self._minimiser)
         else:
@@ -276,6 +305,21 @@ def _free_velocity(H: np.ndarray, c: np.ndarray, out: np.ndarray) -> bool:
     if not np.all(np.isfinite(out)):
         out[:] = 0.0
     return False
+
+
+def _free_velocities(
+    H: np.ndarray, c: np.ndarray, c_ff: np.ndarray, rhs: np.ndarray, out: np.ndarray, out_ff: np.ndarray
+) -> bool:
+    """:func:`_free_velocity` for two linear terms at once (``c`` into ``out``, ``c_ff`` into ``out_ff``)."""
+    rhs[:, 0] = c
+    rhs[:, 1] = c_ff
+    _, x, info = _dposv(H.T, rhs)
+    if info == 0:
+        np.negative(x[:, 0], out=out)
+        np.negative(x[:, 1], out=out_ff)
+        return True
+    _free_velocity(H, c_ff, out_ff)
+    return _free_velocity(H, c, out)
 
 
 def build_ik(

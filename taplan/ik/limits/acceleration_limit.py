@@ -73,6 +73,14 @@ class TargetBraking(StackedBoxLimit):
     ``κ v_free``, the Gauss-Newton direction at the largest speed from which every joint can still stop at the
     target. Without this, joints braking independently bend the path and the frame overshoots in task space.
 
+    A moving target is braked *relative to its motion*: with ``v_ff`` the joint velocity that follows the targets'
+    velocities (``StepContext.v_ff``: explicit twists, or finite differences of successive targets), ``δ`` is
+    ``(v_free - v_ff) dt`` and the bound applies to ``v - v_ff``, so the arm may move with the target at its speed
+    and still only approaches the target as fast as it can stop relative to it. A target that stops is then braked
+    toward exactly as a fixed one (``v_ff = 0``); only a target that stops faster than the acceleration limit allows
+    can be overshot (by what braking at ``a`` from the target's speed requires). The coordination scaling also
+    applies to the relative part: the minimiser becomes ``v_ff + κ (v_free - v_ff)``.
+
     Args:
         acceleration: Braking deceleration [rad/s²], shape (nv,).
     """
@@ -90,6 +98,7 @@ class TargetBraking(StackedBoxLimit):
         self._bound = np.empty(n)
         self._speed = np.empty(n)
         self._ratio = np.empty(n)
+        self._relative = np.empty(n)
         self._direction = np.empty((2, n))
         self._out = np.empty((2, n))
         self.objective_scale = 1.0
@@ -104,7 +113,13 @@ class TargetBraking(StackedBoxLimit):
             self._two_a_dt = 2.0 * self.acceleration * dt
             self._two_adt = 2.0 * self._adt
         bound, speed, ratio = self._bound, self._speed, self._ratio
-        np.abs(ctx.v_free, out=speed)  # |δ| / dt
+        moving = ctx.moving
+        if moving:  # brake relative to the target's motion: δ = (v_free - v_ff) dt
+            relative = self._relative
+            np.subtract(ctx.v_free, ctx.v_ff, out=relative)
+        else:
+            relative = ctx.v_free
+        np.abs(relative, out=speed)  # |δ| / dt
         # bound / speed = 2 a dt / (sqrt(a² dt² + 2 a dt speed) + a dt): no cancellation, and 1 (not 0/0) at speed 0
         np.multiply(speed, self._two_a_dt, out=ratio)
         ratio += self._adt2
@@ -116,8 +131,11 @@ class TargetBraking(StackedBoxLimit):
         # slightly below the ratio so that kappa |v_free| <= bound holds after rounding (the minimiser stays inside)
         self.objective_scale = 1.0 if kappa >= 1.0 else kappa * (1.0 - 1e-12)
         direction = self._direction
-        np.multiply(_SIGN, ctx.v_free, out=direction)
+        np.multiply(_SIGN, relative, out=direction)
         out = self._out
         np.copyto(out, bound)  # broadcast to both rows
         out[direction < 0.0] = np.inf  # moving away from the target: no braking bound on that side
+        if moving:
+            np.multiply(_SIGN, ctx.v_ff, out=direction)
+            out += direction  # upper = v_ff + bound, lower = v_ff - bound
         return out

@@ -45,12 +45,17 @@ class StepContext:
         v_prev: Previous commanded velocity [rad/s], shape (nv,).
         v_free: Minimiser of the objective without constraints [rad/s], shape (nv,) (filled by the problem
             builder before the box limits are evaluated).
+        v_ff: Joint velocity that follows the task targets' motion [rad/s], shape (nv,): the objective's
+            minimiser for the targets' velocities alone (valid when ``moving``).
+        moving: Whether some task target moves this step (else ``v_ff`` is stale and should be read as zero).
     """
 
     kin: Kinematics
     dt: float
     v_prev: np.ndarray
     v_free: np.ndarray
+    v_ff: np.ndarray | None = None
+    moving: bool = False
 
 
 class BoxLimit(abc.ABC):

@@ -58,6 +58,16 @@ class FrameTask(Task):
         self._target = np.eye(4)
         self._R_target_T = self._target[:3, :3].T  # views of the target buffer
         self._p_target = self._target[:3, 3]
+        # target motion (feed-forward): the target at the last ``feedforward`` call, an explicit twist for the step
+        self.estimate_velocity = False
+        self._last = np.eye(4)
+        self._moved = False
+        self._twist: np.ndarray | None = None
+        self._twist_buffer = np.zeros(6)
+        self._delta = np.zeros((4, 4))
+        self._b_zero = False
+        self._M = np.eye(3)
+        self._JlogT = np.eye(3)
 
     def set_target(self, target: Any) -> None:
         """Target pose ``T_root_frame``: 4x4, ``(position, quaternion_xyzw)`` or (7,) (validated)."""
@@ -67,10 +77,72 @@ class FrameTask(Task):
         """Set a 4x4 target that is already validated (hot path; copied into the task's buffer)."""
         self._target[:] = T
         self.target = self._target
+        self._moved = True
 
     def set_target_from_configuration(self, kin: Kinematics) -> None:
-        """Target = the frame's current pose (hold it)."""
+        """Target = the frame's current pose (hold it); forgets the target's motion."""
         self._set(kin.data.oMf[self.frame_id].homogeneous.copy())
+        self.reset_motion()
+
+    def reset_motion(self) -> None:
+        """Forget the target's motion: the current target is the reference of the next velocity estimate."""
+        self._last[:] = self._target
+        self._moved = False
+        self._twist = None
+
+    def set_target_velocity(self, twist: np.ndarray) -> None:
+        """Target twist ``[ṗ* (3,) [m/s], ω* (3,) [rad/s]]`` in root axes for the next step only (validated by the
+        caller); it is fed forward in the objective and in target braking."""
+        self._twist_buffer[:] = twist
+        self._twist = self._twist_buffer
+
+    def feedforward(self, dt: float, b: np.ndarray) -> int:
+        """Write the weighted task-space velocity that follows the target's motion, ``W [ṗ*; J_logᵀ M ω*]``, into
+        ``b`` (6,) [m/s, rad/s] (after ``fill`` at the same configuration).
+
+        The motion is the explicit twist given with ``set_target_velocity`` (returns 2: also fed forward in the
+        objective), else, if ``estimate_velocity``, the finite difference of the target since the previous call over
+        ``dt`` (returns 1: used by target braking only; 0 if the target did not move), else none (returns 0). ``b``
+        is left all zero when 0 is returned.
+        """
+        twist = self._twist
+        if twist is not None:
+            self._twist = None
+            self._last[:] = self._target
+            self._moved = False
+            b[:3] = twist[:3]
+            self._angular(twist[3:], b)
+            self._b_zero = False
+            return 2
+        if self._moved and self.estimate_velocity:
+            self._moved = False
+            d = self._delta
+            np.subtract(self._target, self._last, out=d)
+            if d.any():
+                inv_dt = 1.0 / dt
+                np.multiply(d[:3, 3], inv_dt, out=b[:3])
+                if d[:3, :3].any():
+                    omega = pin.log3(self._target[:3, :3] @ self._last[:3, :3].T)
+                    omega *= inv_dt
+                    self._angular(omega, b)
+                else:
+                    b[3:] = 0.0
+                    if not self._unit:
+                        b[:3] *= self._weights[:3]
+                self._last[:] = self._target
+                self._b_zero = False
+                return 1
+        if not self._b_zero:
+            b.fill(0.0)
+            self._b_zero = True
+        return 0
+
+    def _angular(self, omega: np.ndarray, b: np.ndarray) -> None:
+        """``b[3:] = J_logᵀ M ω*`` and the weights: the target's rotation ω* moves the error ``M = R R*ᵀ`` by
+        ``-M ω*`` (left), i.e. the rotation vector by ``-J_logᵀ M ω*``; following it needs ``+J_logᵀ M ω*``."""
+        np.matmul(self._JlogT, self._M @ omega, out=b[3:])
+        if not self._unit:
+            b *= self._weights
 
     def weights(self) -> np.ndarray:
         return self._weights
@@ -103,7 +175,9 @@ class FrameTask(Task):
         M = np.matmul(pose[:3, :3], self._R_target_T)
         J = pin.getFrameJacobian(kin.model, kin.data, self.frame_id, LOCAL_WORLD_ALIGNED)
         w = self._weights
-        np.matmul(pin.Jlog3(M).T, J[3:], out=A[3:])
+        self._M = M
+        self._JlogT = JlogT = pin.Jlog3(M).T
+        np.matmul(JlogT, J[3:], out=A[3:])
         if self._unit and self.gain == 1.0:
             np.subtract(self._p_target, pose[:3, 3], out=b[:3])
             np.negative(pin.log3(M), out=b[3:])
