@@ -229,11 +229,12 @@ def write_outputs(
     plots: bool,
     say: Callable[[str], None],
 ) -> list[Path]:
-    """Trajectories (CSV at 100 Hz, exact JSON), reports (JSON, text) and plots (PNG)."""
+    """Trajectories (exact JSON, and CSV sampled at 100 Hz), the report (JSON) and plots (PNG)."""
     import json
 
     files: list[Path] = []
     for plan in plans:
+        files.append(plan.trajectory.save(out / f"{plan.name}.json"))
         files.append(plan.trajectory.resample(COMMAND_RATE).save(out / f"{plan.name}_100hz.csv"))
     payload = {
         "plans": {

@@ -17,7 +17,7 @@ from taplan.trajectory import Trajectory
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="trajectory or waypoint file (.csv, .json, .npz)")
+    parser.add_argument("file", type=Path, help="trajectory file (.csv with a time column, .json, .npz)")
     add_controller_arguments(parser, "trajectory")
     parser.add_argument("--limits", choices=("hardware", "planning"), default="hardware", help="limit set (hardware)")
     parser.add_argument("--source", choices=("updates", "samples"), default="updates", help="replay stream to check")

@@ -27,7 +27,9 @@ def add_controller_arguments(parser: argparse.ArgumentParser, default: str) -> N
     )
     parser.add_argument("--update-rate", type=float, default=100.0, help="controller update rate [Hz] (100)")
     parser.add_argument("--pub-rate", type=float, default=10.0, help="joint_states publish rate [Hz] (10)")
-    parser.add_argument("--command-rate", type=float, default=60.0, help="joint_cmd rate for joint mode [Hz] (60)")
+    parser.add_argument(
+        "--command-rate", type=float, default=100.0, help="joint_cmd rate for joint mode [Hz] (100, the arm loop rate)"
+    )
     parser.add_argument("--jitter", type=float, default=0.0, help="joint_cmd period jitter, fraction (0)")
 
 
@@ -46,7 +48,7 @@ def replay_with(trajectory: Trajectory, args: argparse.Namespace, limits=None) -
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="trajectory or waypoint file (.csv, .json, .npz)")
+    parser.add_argument("file", type=Path, help="trajectory file (.csv with a time column, .json, .npz)")
     add_controller_arguments(parser, "seed")
     parser.add_argument("-o", "--output", type=Path, default=None, help="output file (.json, .npz, .csv)")
 

@@ -262,9 +262,15 @@ class JointStreamer:
         return self._set_target_checked(positions, velocities)
 
     def _admit(
-        self, q: list[float], v: list[float], requested_v: list[float] | None, moving: bool, adjusted: bool
+        self,
+        q: list[float],
+        v: list[float],
+        requested_v: list[float] | None,
+        moving: bool,
+        adjusted: bool,
+        requested_q: list[float] | None = None,
     ) -> bool:
-        self._requested = (q, requested_v)
+        self._requested = (q if requested_q is None else requested_q, requested_v)
         self._target_position = q
         self._target_velocity = v
         self._target_moving = moving
@@ -318,6 +324,7 @@ class JointStreamer:
             None if velocities is None else _target_vector(velocities, "velocities", self.n).tolist(),
             any(v_list),
             adjusted,
+            q.tolist(),
         )
 
     def stop(self) -> None:

@@ -66,14 +66,12 @@ class JerkLimitedResult:
         trajectory: The trajectory (polynomial, starts at t = 0).
         topp_duration: Duration of the TOPP-RA (velocity/acceleration only) timing under the full limits [s].
         width: Moving-average width used [s].
-        acceleration_scale: Scaling of the acceleration limit given to TOPP-RA before filtering.
         time_scale: Uniform time scaling applied after filtering (>= 1).
     """
 
     trajectory: Trajectory
     topp_duration: float
     width: float
-    acceleration_scale: float
     time_scale: float
 
     @property
@@ -190,8 +188,9 @@ def jerk_limited(
     polynomial segments), acceleration is continuous and zero at both ends, and the waypoints are passed exactly.
 
     Repair: where the filtered trajectory exceeds a limit (by a ratio r), the TOPP-RA velocity and acceleration
-    limits of the gridpoints that feed that stretch (the window ``[t - w, t]``) are scaled by 1/r and TOPP-RA is
-    solved again, ``repairs`` times; any excess left is removed by uniform time scaling.
+    limits of the gridpoints that feed that stretch (the window ``[t - w, t]``) are scaled by 1/r**0.8
+    (``TIGHTEN_EXPONENT``: full steps over-tighten) and TOPP-RA is solved again, ``repairs`` times; any excess left
+    is removed by uniform time scaling.
 
     Args:
         path_or_waypoints: A :class:`~taplan.timing.path.Path` or waypoints [rad], shape (N, n).
@@ -249,7 +248,7 @@ def jerk_limited(
         assert round_best is not None
         duration, traj, w, c, segment_ratio = round_best
         if best is None or duration < best.trajectory.duration:
-            best = JerkLimitedResult(time_scaled(traj, c) if c > 1.0 else traj, topp_duration, w, 1.0, c)
+            best = JerkLimitedResult(time_scaled(traj, c) if c > 1.0 else traj, topp_duration, w, c)
         if c <= 1.0:
             break
         scale = _tighten(scale, profile.times, traj.times, w, segment_ratio)

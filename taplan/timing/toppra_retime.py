@@ -5,7 +5,7 @@ Method
 1. **Path.** Waypoints become a :class:`~taplan.timing.path.Path` (C² cubic spline ``q(s)``). Non-zero boundary
    velocities set the spline's end tangents, so the requested velocity is tangent to the path.
 2. **Grid.** Every waypoint is a gridpoint and each waypoint interval is split uniformly into
-   ``points_per_segment`` parts (at least 128 gridpoints in all). toppra's default gridpoint proposal, which costs
+   ``points_per_segment`` parts (at least 128 grid segments in all). toppra's default gridpoint proposal, which costs
    more than the solve itself, is not used.
 3. **Constraints.** Joint velocity at the gridpoints (toppra's ``JointVelocityConstraint``) and
    :class:`~taplan.timing.constraints.SegmentLimitConstraint`: velocity and acceleration at the start, middle and end
