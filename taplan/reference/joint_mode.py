@@ -98,7 +98,8 @@ class JointModeRobot:
         n = q_cmd.shape[1]
         names = _names(joint_names, n)
         lim = _limits(self.limits, names)
-        q = q_cmd[0].copy() if initial_positions is None else as_vector(initial_positions, "initial_positions", n)
+        q0 = q_cmd[0].copy() if initial_positions is None else as_vector(initial_positions, "initial_positions", n)
+        q = q0.copy()
         dt = 1.0 / self.rate
         end = t_cmd[-1] + 0.5 if duration is None else as_positive(duration, "duration")
         ticks = np.arange(1, int(np.floor(end * self.rate + 1e-9)) + 1) * dt
@@ -126,7 +127,6 @@ class JointModeRobot:
                 v = want
                 q = np.clip(q + np.clip(v * dt, -step, step), lim.lower, lim.upper)
                 out_q[k], out_v[k] = q, v
-        q0 = q_cmd[0].copy() if initial_positions is None else as_vector(initial_positions, "initial_positions", n)
         return Replay(
             controller=f"joint_mode[{self.convention}]",
             joint_names=names,
