@@ -167,3 +167,9 @@ def test_joint_mode_rejects_bad_streams() -> None:
         robot.replay([0.0, 0.1], np.zeros((3, 7)))
     with pytest.raises(InvalidInputError):
         JointModeRobot(rate=0.0)
+
+
+def test_joint_mode_accepts_the_api_name_of_the_feedback_convention():
+    from taplan.reference import JointModeRobot
+
+    assert JointModeRobot(convention="velocity_feedback").convention == "velocity"

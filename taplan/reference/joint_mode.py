@@ -40,7 +40,8 @@ class JointModeRobot:
 
     Args:
         limits: Joint limits (hardware ceilings); default the bundled TeleAvatar's, matched by name at replay.
-        convention: ``"position"`` or ``"velocity"``.
+        convention: ``"position"`` or ``"velocity"`` (also accepted as ``"velocity_feedback"``, as in
+            :func:`taplan.api.joint_cmd`).
         rate: Loop rate [Hz].
         kp: Velocity-convention gains [1/s], shape (n,); default ``ARM_KP`` per arm.
         velocity_fraction: Velocity-convention cap as a fraction of the velocity limit.
@@ -51,15 +52,17 @@ class JointModeRobot:
     def __init__(
         self,
         limits: JointLimits | None = None,
-        convention: Literal["position", "velocity"] = "position",
+        convention: Literal["position", "velocity", "velocity_feedback"] = "position",
         rate: float = 100.0,
         kp: npt.ArrayLike | None = None,
         velocity_fraction: float = 0.3,
         command_timeout: float = 0.5,
         acceleration_limit: bool = False,
     ) -> None:
+        if convention == "velocity_feedback":  # the name taplan.api.joint_cmd uses for the same convention
+            convention = "velocity"
         if convention not in ("position", "velocity"):
-            raise InvalidInputError("convention", convention, "'position' or 'velocity'")
+            raise InvalidInputError("convention", convention, "'position' or 'velocity' ('velocity_feedback')")
         self.limits = limits
         self.convention = convention
         self.rate = as_positive(rate, "rate")
