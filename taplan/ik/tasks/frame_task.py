@@ -61,13 +61,15 @@ class FrameTask(Task):
         # target motion (feed-forward): the target at the last ``feedforward`` call, an explicit twist for the step
         self.estimate_velocity = False
         self._last = np.eye(4)
+        self._p_last = self._last[:3, 3]
+        self._last_bytes = self._last.tobytes()
         self._moved = False
         self._twist: np.ndarray | None = None
         self._twist_buffer = np.zeros(6)
-        self._delta = np.zeros((4, 4))
         self._b_zero = False
         self._M = np.eye(3)
         self._JlogT = np.eye(3)
+        self._views: tuple[np.ndarray, ...] | None = None
 
     def set_target(self, target: Any) -> None:
         """Target pose ``T_root_frame``: 4x4, ``(position, quaternion_xyzw)`` or (7,) (validated)."""
@@ -87,6 +89,7 @@ class FrameTask(Task):
     def reset_motion(self) -> None:
         """Forget the target's motion: the current target is the reference of the next velocity estimate."""
         self._last[:] = self._target
+        self._last_bytes = self._target.tobytes()
         self._moved = False
         self._twist = None
 
@@ -109,6 +112,7 @@ class FrameTask(Task):
         if twist is not None:
             self._twist = None
             self._last[:] = self._target
+            self._last_bytes = self._target.tobytes()
             self._moved = False
             b[:3] = twist[:3]
             self._angular(twist[3:], b)
@@ -116,20 +120,23 @@ class FrameTask(Task):
             return 2
         if self._moved and self.estimate_velocity:
             self._moved = False
-            d = self._delta
-            np.subtract(self._target, self._last, out=d)
-            if d.any():
+            # compare bytes (cheaper than array operations; -0.0 vs 0.0 only costs a zero estimate)
+            now, last = self._target.tobytes(), self._last_bytes
+            if now != last:
                 inv_dt = 1.0 / dt
-                np.multiply(d[:3, 3], inv_dt, out=b[:3])
-                if d[:3, :3].any():
+                b3 = b[:3]
+                np.subtract(self._p_target, self._p_last, out=b3)
+                b3 *= inv_dt
+                if now[0:24] != last[0:24] or now[32:56] != last[32:56] or now[64:88] != last[64:88]:
                     omega = pin.log3(self._target[:3, :3] @ self._last[:3, :3].T)
                     omega *= inv_dt
                     self._angular(omega, b)
                 else:
                     b[3:] = 0.0
                     if not self._unit:
-                        b[:3] *= self._weights[:3]
+                        b3 *= self._weights[:3]
                 self._last[:] = self._target
+                self._last_bytes = now
                 self._b_zero = False
                 return 1
         if not self._b_zero:
@@ -171,18 +178,24 @@ class FrameTask(Task):
     def fill(self, kin: Kinematics, A: np.ndarray, b: np.ndarray) -> None:
         if self.target is None:
             self._require_target()
-        pose = kin.data.oMf[self.frame_id].homogeneous
-        M = np.matmul(pose[:3, :3], self._R_target_T)
+        placement = kin.data.oMf[self.frame_id]
+        M = np.matmul(placement.rotation, self._R_target_T)
         J = pin.getFrameJacobian(kin.model, kin.data, self.frame_id, LOCAL_WORLD_ALIGNED)
         w = self._weights
         self._M = M
         self._JlogT = JlogT = pin.Jlog3(M).T
+        if self._unit and self.gain == 1.0:  # hot path: the row blocks of A and b are cached views
+            views = self._views
+            if views is None or views[0] is not A or views[1] is not b:
+                views = self._views = (A, b, A[:3], A[3:], b[:3], b[3:])
+            np.matmul(JlogT, J[3:], out=views[3])
+            views[2][:] = J[:3]
+            np.subtract(self._p_target, placement.translation, out=views[4])
+            np.negative(pin.log3(M), out=views[5])
+            return
+        pose = placement.homogeneous
         np.matmul(JlogT, J[3:], out=A[3:])
-        if self._unit and self.gain == 1.0:
-            np.subtract(self._p_target, pose[:3, 3], out=b[:3])
-            np.negative(pin.log3(M), out=b[3:])
-            A[:3] = J[:3]
-        elif self._unit:
+        if self._unit:
             np.subtract(pose[:3, 3], self._p_target, out=b[:3])
             b[3:] = pin.log3(M)
             A[:3] = J[:3]
