@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from taplan.stream.joint_streamer import POSITION_TOLERANCE, JointStreamer
 from taplan.stream.pose_streamer import PoseStreamer, PoseStreamState
-from taplan.stream.safety import Watchdog, braking_distance, max_safe_velocity
+from taplan.stream.safety import Watchdog, braking_distance, max_safe_velocity, stopping_range
 from taplan.stream.state import StreamState, StreamStatus
 
 __all__ = [
@@ -22,4 +22,5 @@ __all__ = [
     "Watchdog",
     "braking_distance",
     "max_safe_velocity",
+    "stopping_range",
 ]

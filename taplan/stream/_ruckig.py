@@ -22,6 +22,7 @@ import ruckig
 
 from taplan.errors import StreamError
 from taplan.limits import JointLimits
+from taplan.stream.safety import stop_excursion
 
 __all__: list[str] = []
 
@@ -41,6 +42,7 @@ class RuckigAdapter:
     def __init__(self, limits: JointLimits, dt: float) -> None:
         n = limits.size
         self.n = n
+        self.dt = dt
         self.otg = ruckig.Ruckig(n, dt)
         self.inp = ruckig.InputParameter(n)
         self.out = ruckig.OutputParameter(n)
@@ -48,6 +50,8 @@ class RuckigAdapter:
         self.inp.max_acceleration = limits.acceleration.tolist()
         self.inp.max_jerk = limits.jerk.tolist()
         self._zeros = [0.0] * n
+        self._amax = limits.acceleration.tolist()
+        self._jmax = limits.jerk.tolist()
         self.inp.target_acceleration = self._zeros  # never changes: every target is at zero acceleration
         self._interface: tuple[object, object] | None = None  # (control interface, synchronization) last assigned
         self._range = range(n)
@@ -100,6 +104,10 @@ class RuckigAdapter:
 
         ``check_end=False`` skips the end state, for a position target at rest inside the bounds: every joint ends
         and stays on it (a moving target's early joints coast on past their profile, which only the end shows).
+        A moving end state must also leave room for the shortest stop from it (:func:`stop_excursion`): without
+        synchronisation an early joint coasts at its target velocity until the slowest joint arrives, so the
+        admission rule for target velocities (room for one period of coasting past the target) does not cover it.
+        The end is checked with that period of coasting as well.
 
         ruckig's ``position_extrema`` misses an extremum inside a constant-acceleration segment (it looks for interior
         extrema only where the jerk is non-zero) and omits the straight tail of joints that arrive early without
@@ -110,14 +118,25 @@ class RuckigAdapter:
         """
         trajectory = self.out.trajectory
         lo, hi = self._lo, self._hi
-        end = trajectory.at_time(trajectory.duration)[0] if check_end else None
+        if check_end:
+            end, end_velocity, end_acceleration = trajectory.at_time(trajectory.duration)[:3]
+        else:
+            end = None
         extrema = trajectory.position_extrema
         first_time = trajectory.get_first_time_at_position
         suspects = []
         for i in self._range if joints is None else joints:
             low, high = lo[i], hi[i]
-            if end is not None and not low <= end[i] <= high:
-                return True  # the end state is exact
+            if end is not None:
+                if not low <= end[i] <= high:
+                    return True  # the end state is exact
+                if end_velocity[i] != 0.0 or end_acceleration[i] != 0.0:
+                    # ruckig reports the end up to one period late, having coasted on at the end velocity
+                    speed = end_velocity[i]
+                    coast = speed * self.dt
+                    down, up = stop_excursion(speed, end_acceleration[i], self._amax[i], self._jmax[i])
+                    if end[i] + min(coast, 0.0) + down < low or end[i] + max(coast, 0.0) + up > high:
+                        return True
             bound = extrema[i]
             if bound.min < low or bound.max > high or first_time(i, low) is not None or first_time(i, high) is not None:
                 suspects.append(i)

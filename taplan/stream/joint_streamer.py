@@ -7,9 +7,11 @@ across retargets because every new trajectory starts from the last emitted state
 * velocity, acceleration and jerk: ruckig's guarantee, from a start state that ``reset`` checks;
 * position: taplan's, since the free ruckig ignores position limits. Targets are admitted into the bounds (clamped
   or rejected, see ``on_out_of_bounds``), a target velocity is reduced until its braking stop fits inside the bounds,
-  and every new trajectory's position range (``position_extrema``) is checked; when it leaves the bounds the
-  streamer falls back to per-joint time-optimal profiles, then to a zero target velocity, then to braking.
-  Each emitted position is verified against the bounds as well.
+  the first period of every new trajectory is vouched for (the emitted state and its shortest stop inside the
+  bounds, in closed form) and the trajectory's whole position range is checked before a second period of it is
+  emitted (see :mod:`taplan.stream.safety`); when it leaves the bounds the streamer falls back to per-joint
+  time-optimal profiles to the target at rest, then to braking. Emitted positions are clipped to the bounds (ruckig's
+  accuracy, at most ``POSITION_TOLERANCE``).
 
 Safety: with no new target for ``timeout`` [s] the streamer brakes to rest along the shortest jerk-limited stop
 (ruckig's velocity interface), so a dead client never leaves the arm moving; a NaN/inf/wrong-size target raises
@@ -29,7 +31,7 @@ from taplan._validation import as_positive, as_vector
 from taplan.errors import InvalidInputError, StreamError
 from taplan.limits import JointLimits
 from taplan.stream._ruckig import FINISHED, RuckigAdapter
-from taplan.stream.safety import Watchdog, braking_distance, max_safe_velocity
+from taplan.stream.safety import Watchdog, braking_distance, max_safe_velocity, stop_excursion
 from taplan.stream.state import StreamState, StreamStatus
 
 __all__ = ["JointStreamer", "POSITION_TOLERANCE"]
@@ -107,6 +109,13 @@ class JointStreamer:
         self._upper_list = self._upper.tolist()
         self._vmax_list = self._vmax.tolist()
         self._speed_rows = _speed_rows(limits, self.dt)
+        self._stop_rows = [
+            (low, high, amax, jmax, 0.5 / jmax, 1.0 / jmax, 2.0 * amax / jmax, 1.0 / amax)
+            for low, high, amax, jmax in zip(
+                self._lower_list, self._upper_list, limits.acceleration.tolist(), limits.jerk.tolist(), strict=True
+            )
+        ]
+        self._unchecked = False  # the trajectory being followed was vouched for over its first period only
         self._shape = (self.n,)
         self._state: StreamState | None = None
         self._time = 0.0
@@ -221,6 +230,7 @@ class JointStreamer:
             self._mode = _POSITION
         self._time = 0.0
         self._pending = None
+        self._unchecked = False
         self._target_position = q.tolist()
         self._target_velocity = self._zero_list
         self._target_moving = False
@@ -363,10 +373,25 @@ class JointStreamer:
             result = self._brake_now()
         out = adapter.out
         new_calculation = out.new_calculation
-        # a new target at rest ends inside the bounds (admitted there): its end state needs no check
-        if new_calculation and adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
-            result = self._fallback(result)
-        position = np.array(out.new_position)
+        new_position = out.new_position
+        if new_calculation:
+            # Vouch for the first period: the emitted state inside the bounds with its shortest stop inside them
+            # too. The trajectory's whole range is checked only if a second period of it is ever emitted (below):
+            # a stream that retargets every period never pays for that check.
+            self._unchecked = _stop_fits(new_position, out.new_velocity, out.new_acceleration, self._stop_rows)
+            # a new target at rest ends inside the bounds (admitted there): its end state needs no check
+            if not self._unchecked and adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
+                result = self._fallback(result)
+                new_position = out.new_position
+        elif self._unchecked:
+            # following a vouched-for trajectory beyond its first period: check it whole now; on failure, restart
+            # from the last emitted state (vouched for: its stop fits), as for a new trajectory
+            self._unchecked = False
+            if adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
+                result = self._fallback(result)
+                new_calculation = True
+                new_position = out.new_position
+        position = np.array(new_position)
         velocity = np.array(out.new_velocity)
         acceleration = np.array(out.new_acceleration)
         jerk = np.array(out.new_jerk)
@@ -435,6 +460,34 @@ def _inside(values: list[float], lower: list[float], upper: list[float]) -> bool
     """``lower <= values <= upper`` elementwise (False for NaN)."""
     for x, low, high in zip(values, lower, upper, strict=True):  # noqa: SIM110 (a plain loop is faster than all())
         if not low <= x <= high:
+            return False
+    return True
+
+
+_STOP_MARGIN = 1e-9  # [rad]: the closed-form stop matches ruckig's braking profile to ~1e-14 [rad]
+
+
+def _stop_fits(
+    position: list[float], velocity: list[float], acceleration: list[float], rows: list[tuple[float, ...]]
+) -> bool:
+    """Every joint inside the bounds and its shortest stop (:func:`stop_excursion`) inside them (False for NaN).
+
+    A cheap screen first: the stop never moves faster than ``s = |v| + a^2 / (2 j)`` and lasts at most
+    ``|a| / j + 2 amax / j + s / amax`` (jerk phases of at most ``(|a| + amax) / j`` and ``amax / j``, a hold that
+    changes the velocity by at most ``s``), so its excursion is at most ``s`` times that; only a joint nearer a
+    bound than this is given the exact closed form.
+    """
+    for p, v, a, (low, high, amax, jmax, half_inv_j, inv_j, two_a_over_j, inv_a) in zip(
+        position, velocity, acceleration, rows, strict=True
+    ):
+        if not low <= p <= high:
+            return False
+        speed = abs(v) + a * a * half_inv_j
+        reach = speed * (abs(a) * inv_j + two_a_over_j + speed * inv_a) + _STOP_MARGIN
+        if low + reach <= p <= high - reach:
+            continue
+        down, up = stop_excursion(v, a, amax, jmax)
+        if not (p + down >= low + _STOP_MARGIN and p + up <= high - _STOP_MARGIN):
             return False
     return True
 
