@@ -116,6 +116,7 @@ class JointStreamer:
             )
         ]
         self._unchecked = False  # the trajectory being followed was vouched for over its first period only
+        self._retargeting = False  # the last step computed a new trajectory
         self._shape = (self.n,)
         self._state: StreamState | None = None
         self._time = 0.0
@@ -231,6 +232,7 @@ class JointStreamer:
         self._time = 0.0
         self._pending = None
         self._unchecked = False
+        self._retargeting = False
         self._target_position = q.tolist()
         self._target_velocity = self._zero_list
         self._target_moving = False
@@ -378,7 +380,11 @@ class JointStreamer:
             # Vouch for the first period: the emitted state inside the bounds with its shortest stop inside them
             # too. The trajectory's whole range is checked only if a second period of it is ever emitted (below):
             # a stream that retargets every period never pays for that check.
-            self._unchecked = _stop_fits(new_position, out.new_velocity, out.new_acceleration, self._stop_rows)
+            # Vouching pays off only for a stream that retargets every period (the previous step computed too);
+            # otherwise the whole check would merely move to the next period.
+            self._unchecked = self._retargeting and _stop_fits(
+                new_position, out.new_velocity, out.new_acceleration, self._stop_rows
+            )
             # a new target at rest ends inside the bounds (admitted there): its end state needs no check
             if not self._unchecked and adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
                 result = self._fallback(result)
@@ -391,6 +397,7 @@ class JointStreamer:
                 result = self._fallback(result)
                 new_calculation = True
                 new_position = out.new_position
+        self._retargeting = new_calculation
         position = np.array(new_position)
         velocity = np.array(out.new_velocity)
         acceleration = np.array(out.new_acceleration)
