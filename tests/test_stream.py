@@ -27,15 +27,7 @@ def streamer(limits, teleavatar) -> JointStreamer:
 def _violations(states, limits, initial):
     from taplan.stream.sweep import StreamRecord
 
-    record = StreamRecord(
-        np.array([s.time for s in states]),
-        np.array([s.position for s in states]),
-        np.array([s.velocity for s in states]),
-        np.array([s.acceleration for s in states]),
-        np.array([s.jerk for s in states]),
-        [s.status.value for s in states],
-        np.array([s.new_calculation for s in states]),
-    )
+    record = StreamRecord.from_states(states)
     return stream_violations(record, limits, DT, initial)
 
 

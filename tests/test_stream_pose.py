@@ -20,15 +20,7 @@ def streamer(teleavatar):
 
 
 def _record(states):
-    return StreamRecord(
-        np.array([s.time for s in states]),
-        np.array([s.position for s in states]),
-        np.array([s.velocity for s in states]),
-        np.array([s.acceleration for s in states]),
-        np.array([s.jerk for s in states]),
-        [s.status.value for s in states],
-        np.array([s.new_calculation for s in states]),
-    )
+    return StreamRecord.from_states(states)
 
 
 def test_dual_arm_poses_reached_within_limits(streamer, teleavatar):

@@ -110,16 +110,7 @@ def test_retarget_every_period_near_bounds(teleavatar, synchronization):
                 v = rng.uniform(-1.0, 1.0, limits.size) * limits.velocity if k % 2 else None
                 streamer.set_target(q, v)
             states.append(streamer.step())
-        record_positions = np.array([s.position for s in states])
-        record = StreamRecord(
-            np.array([s.time for s in states]),
-            record_positions,
-            np.array([s.velocity for s in states]),
-            np.array([s.acceleration for s in states]),
-            np.array([s.jerk for s in states]),
-            [s.status.value for s in states],
-            np.array([s.new_calculation for s in states]),
-        )
+        record = StreamRecord.from_states(states)
         counts = stream_violations(record, limits, DT, initial)
         assert counts == dict.fromkeys(counts, 0)
         assert states[-1].at_rest

@@ -17,6 +17,7 @@ which a jump at a retarget would break.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +67,19 @@ class StreamRecord:
     rejected: int = 0  # malformed targets that raised StreamError
     adjusted: int = 0  # targets admitted after clamping
     faults: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_states(cls, states: Sequence[StreamState]) -> StreamRecord:
+        """A record of the states a streamer emitted, in order."""
+        return cls(
+            np.array([s.time for s in states]),
+            np.array([s.position for s in states]),
+            np.array([s.velocity for s in states]),
+            np.array([s.acceleration for s in states]),
+            np.array([s.jerk for s in states]),
+            [s.status.value for s in states],
+            np.array([s.new_calculation for s in states]),
+        )
 
 
 def random_scenario(
