@@ -34,8 +34,7 @@ def run(args: argparse.Namespace) -> int:
     result = run_demo(args.out, progress=progress, plots=not args.no_plots)
     bar.close()
     print(
-        "taplan demo on the bundled TeleAvatar: plans under the planning limits, checks against the hardware"
-        " ceilings\n"
+        "taplan demo on the bundled TeleAvatar: plans under the planning limits, checks against the hardware ceilings\n"
     )
     failed = 0
     for plan in result.plans:
