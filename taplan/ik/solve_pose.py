@@ -134,7 +134,7 @@ def solve_pose(
             q = rng.uniform(limits.lower, limits.upper)
         previous = np.inf
         stall = 0
-        for _ in range(int(max_iterations)):
+        for step in range(int(max_iterations) + 1):  # the last pass only evaluates the final configuration
             kin.update(q)
             pos, rot, cost = _errors(kin, tasks, tol_p, tol_r)
             if cost < best_cost:
@@ -142,7 +142,7 @@ def solve_pose(
             if all(pos[f] <= tol_p for f in pos) and all(rot[f] <= tol_r for f in rot):
                 return IKResult(q.copy(), True, pos, rot, iterations, attempt)
             stall = stall + 1 if cost > 0.999 * previous else 0
-            if stall >= 5:
+            if stall >= 5 or step == int(max_iterations):
                 break
             previous = cost
             builder.damping = 1e-9 + lm_damping * _squared_error(kin, tasks)  # Levenberg-Marquardt
@@ -150,13 +150,6 @@ def solve_pose(
             v = project(problem, backend.solve(problem))
             q = q + v
             iterations += 1
-        else:
-            kin.update(q)
-            pos, rot, cost = _errors(kin, tasks, tol_p, tol_r)
-            if cost < best_cost:
-                best_q, best_cost, best_err = q.copy(), cost, (pos, rot)
-            if all(pos[f] <= tol_p for f in pos) and all(rot[f] <= tol_r for f in rot):
-                return IKResult(q.copy(), True, pos, rot, iterations, attempt)
     return IKResult(best_q, False, best_err[0], best_err[1], iterations, int(restarts))
 
 
