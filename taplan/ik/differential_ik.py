@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 from taplan._validation import as_positive, as_vector
 from taplan.errors import InvalidInputError, UnknownNameError
+from taplan.ik._fused import FusedBuilder
 from taplan.ik._kinematics import Kinematics
 from taplan.ik._targets import as_transform
 from taplan.ik.limits import AccelerationLimit, CollisionLimit, PositionLimit, TargetBraking, VelocityLimit
@@ -86,6 +87,8 @@ class DifferentialIK:
         posture: Posture reference [rad] (nq,); default: the configuration given to ``reset``.
         extra_tasks: More tasks (e.g. a :class:`~taplan.ik.tasks.RelativeFrameTask`).
         extra_limits: More limits.
+        fused: Build the default configuration's QP with the fused builder (:mod:`taplan.ik._fused`); False, or any
+            extra task or limit, uses the generic :class:`~taplan.ik.problem.ProblemBuilder` (same problem, slower).
     """
 
     def __init__(
@@ -108,6 +111,7 @@ class DifferentialIK:
         posture: npt.ArrayLike | None = None,
         extra_tasks: Sequence[Task] = (),
         extra_limits: Sequence[BoxLimit | RowLimit] = (),
+        fused: bool = True,
     ) -> None:
         self.robot = robot
         self.dt = as_positive(dt, "dt")
@@ -126,11 +130,15 @@ class DifferentialIK:
         lim = self.limits
         self.acceleration_limit = bool(acceleration_limit)
         acc = lim.acceleration if self.acceleration_limit else None
-        box: list[BoxLimit | RowLimit] = [VelocityLimit(lim.velocity), PositionLimit(lim.lower, lim.upper, acc)]
+        velocity, position = VelocityLimit(lim.velocity), PositionLimit(lim.lower, lim.upper, acc)
+        box: list[BoxLimit | RowLimit] = [velocity, position]
+        acceleration = braking = None
         if acc is not None:
-            box.append(AccelerationLimit(acc))
+            acceleration = AccelerationLimit(acc)
+            box.append(acceleration)
             if target_braking:
-                box.append(TargetBraking(acc))
+                braking = TargetBraking(acc)
+                box.append(braking)
                 for task in self.tasks.values():
                     task.estimate_velocity = True  # brake relative to the targets' motion
         self.collision: CollisionLimit | None = None
@@ -142,7 +150,21 @@ class DifferentialIK:
                 )
                 box.append(self.collision)
         tasks: list[Task] = [*self.tasks.values(), self.posture_task, *extra_tasks]
-        self.builder = ProblemBuilder(self.kin, tasks, [*box, *extra_limits], damping)
+        self.builder: ProblemBuilder | FusedBuilder
+        if fused and not extra_tasks and not extra_limits:
+            self.builder = FusedBuilder(
+                self.kin,
+                list(self.tasks.values()),
+                self.posture_task,
+                damping,
+                velocity,
+                position,
+                acceleration,
+                braking,
+                self.collision,
+            )
+        else:
+            self.builder = ProblemBuilder(self.kin, tasks, [*box, *extra_limits], damping)
         self.solver: QPSolver = get_solver(solver) if isinstance(solver, str) else solver
         self._q = np.zeros(robot.nq)
         self._v = np.zeros(robot.nq)

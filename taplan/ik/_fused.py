@@ -1,0 +1,335 @@
+"""The default stepper's QP assembled in one pass: the hot path of :class:`~taplan.ik.DifferentialIK`.
+
+:class:`~taplan.ik.problem.ProblemBuilder` assembles any combination of tasks and limits through their methods. For a
+14-joint problem the arithmetic is tiny and the time goes to interpreter and numpy call overhead (0.3-1.5 µs per
+operation), so the default configuration (frame tasks, one posture task, damping; velocity, position, acceleration
+and target-braking bounds; collision rows) gets this builder, which returns the same :class:`Problem` with about half
+the operations:
+
+- the posture rows are not stored: ``H = AᵀA + diag(w² + λ)`` with ``A`` the frame rows only;
+- the orientation error is taken on ``M' = R* Rᵀ``, whose ``log3`` and ``Jlog3`` are the rows themselves
+  (``log(M') = -log(R R*ᵀ)``, ``Jlog3(M') = Jlog3(R R*ᵀ)ᵀ``), saving the sign and transpose operations;
+- both right-hand sides (the objective's and the targets' motion) go through one Cholesky call;
+- the box layers are written into one array (L, 2, nv) and intersected by one reduction. The sequential relaxed
+  intersection of :mod:`taplan.ik.limits.limit` runs only when that intersection is empty: when it is not, no layer
+  can have been relaxed and both give the same box.
+
+Parameters are read from the same task and limit objects the generic builder uses (one definition of each limit);
+``tests/test_ik_fused.py`` checks that both builders produce the same problems and steps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg.lapack import dposv as _dposv
+
+from taplan.ik._kinematics import LOCAL_WORLD_ALIGNED, Kinematics
+from taplan.ik.limits import AccelerationLimit, CollisionLimit, PositionLimit, TargetBraking, VelocityLimit
+from taplan.ik.limits.limit import StepContext, intersect_stacked
+from taplan.ik.problem import Problem, _free_velocity
+from taplan.ik.tasks import FrameTask, PostureTask
+
+__all__ = ["FusedBuilder"]
+
+_SIGN = np.array([[1.0], [-1.0]])
+_INF = np.inf
+
+_log3 = pin.log3
+_Jlog3 = pin.Jlog3
+_frame_jacobian = pin.getFrameJacobian
+_frame_placement = pin.updateFramePlacement
+_joint_jacobians = pin.computeJointJacobians
+
+
+class FusedBuilder:
+    """Builds the default stepper's :class:`Problem` (same contract as ``ProblemBuilder.build``).
+
+    Args:
+        kin: Kinematics (its ``q`` and ``data`` are updated by ``build``; frame placements only for task frames).
+        frames: Frame tasks.
+        posture: The posture task.
+        damping: Levenberg-Marquardt damping ``λ`` >= 0.
+        velocity: Velocity limit.
+        position: Position limit.
+        acceleration: Acceleration limit, or None.
+        braking: Target braking (requires ``acceleration``), or None.
+        collision: Collision rows, or None.
+    """
+
+    def __init__(
+        self,
+        kin: Kinematics,
+        frames: Sequence[FrameTask],
+        posture: PostureTask,
+        damping: float,
+        velocity: VelocityLimit,
+        position: PositionLimit,
+        acceleration: AccelerationLimit | None = None,
+        braking: TargetBraking | None = None,
+        collision: CollisionLimit | None = None,
+    ) -> None:
+        n = kin.nv
+        self.kin = kin
+        self.tasks = [*frames, posture]
+        self.posture = posture
+        self.damping = damping
+        self.velocity, self.position, self.acceleration, self.braking = velocity, position, acceleration, braking
+        self.collision = collision
+        self.box_limits = [lim for lim in (acceleration, velocity, position, braking) if lim is not None]
+        self.row_limits = [] if collision is None else [collision]
+        rows = 6 * len(frames)
+        self._A = np.zeros((rows, n))
+        self._AT = self._A.T
+        self._b = np.zeros(rows)
+        self._b_ff = np.zeros(rows)
+        self._frames = []
+        for i, task in enumerate(frames):
+            r = slice(6 * i, 6 * i + 6)
+            A, b = self._A[r], self._b[r]
+            self._frames.append((task, task.frame_id, A, b, self._b_ff[r], A[:3], A[3:], b[:3], b[3:]))
+        self._H = np.zeros((n, n))
+        self._c = np.zeros(n)
+        self._c_ff = np.zeros(n)
+        self._rhs = np.zeros((n, 2), order="F")
+        self._rhs0, self._rhs1 = self._rhs[:, 0], self._rhs[:, 1]
+        self._tmp = np.zeros(n)
+        self._v_prev = np.zeros(n)
+        self._v_free = np.zeros(n)
+        self._v_ff = np.zeros(n)
+        self._minimiser = np.zeros(n)
+        self._stack = np.zeros((len(self.box_limits), 2, n))
+        self._box = np.zeros((2, n))
+        self._scratch = np.zeros((2, n))
+        self._width = np.zeros(n)
+        self._neg = np.zeros(n, dtype=bool)
+        self._distance = np.zeros((2, n))
+        self._outside = np.zeros((2, n), dtype=bool)
+        self._relative = np.zeros(n)
+        self._speed = np.zeros(n)
+        self._ratio = np.zeros(n)
+        self._away = np.zeros((2, n), dtype=bool)
+        self._ff_signed = np.zeros((2, n))
+        self._lower = np.zeros(n)
+        self._upper = self._box[0]
+        layer = {id(lim): self._stack[k] for k, lim in enumerate(self.box_limits)}
+        self._acc_out = None if acceleration is None else layer[id(acceleration)]
+        self._pos_out = layer[id(position)]
+        self._brake_out = None if braking is None else layer[id(braking)]
+        layer[id(velocity)][:] = velocity.velocity  # constant: [v_max, v_max]
+        self._dt = -1.0
+        self._posture_weights: np.ndarray | None = None
+        self._ctx = StepContext(kin, 0.01, self._v_prev, self._v_free, self._v_ff)
+        max_rows = 0 if collision is None else collision.max_rows
+        self._G = np.zeros((max_rows, n))
+        self._h = np.zeros(max_rows)
+        self.problem = Problem(
+            self._H,
+            self._c,
+            self._lower,
+            self._upper,
+            self._G[:0],
+            self._h[:0],
+            0.01,
+            self._v_prev,
+            self._v_free,
+            [(lim.name, layer[id(lim)]) for lim in self.box_limits],
+            minimiser=self._minimiser,
+        )
+
+    @property
+    def damping(self) -> float:
+        """Levenberg-Marquardt damping ``λ`` on the Hessian's diagonal."""
+        return self._damping
+
+    @damping.setter
+    def damping(self, value: float) -> None:
+        from taplan.errors import InvalidInputError
+
+        if not (np.isfinite(value) and value >= 0.0):
+            raise InvalidInputError("damping", value, "a number >= 0")
+        self._damping = float(value)
+        self._posture_weights = None  # rebuild the diagonal
+
+    def _new_dt(self, dt: float) -> None:
+        self._dt = dt
+        if self.acceleration is not None:
+            self._acc_step = np.tile(self.acceleration.acceleration * dt, (2, 1))
+            two_a = self.position._two_a
+            self._pos_adt = 0.5 * two_a * dt
+            self._pos_adt2 = self._pos_adt * self._pos_adt
+        if self.braking is not None:
+            a = self.braking.acceleration
+            self._brake_adt = a * dt
+            self._brake_adt2 = self._brake_adt * self._brake_adt
+            self._brake_two_a_dt = 2.0 * a * dt
+            self._brake_two_adt = 2.0 * self._brake_adt
+
+    def _new_posture_weights(self) -> None:
+        w = self.posture._weights
+        self._posture_weights = w
+        self._posture_gain = w * w * self.posture.gain  # Aᵀb of the posture rows is w² gain (q* - q)
+        self._diagonal = np.diag(w * w + self._damping)
+
+    def build(self, q: np.ndarray, dt: float, v_prev: np.ndarray | None = None) -> Problem:
+        """Update kinematics at ``q`` [rad] and fill the problem for a step of ``dt`` [s] (inputs not validated)."""
+        kin = self.kin
+        model, data = kin.model, kin.data
+        kq = kin.q
+        kq[:] = q
+        _joint_jacobians(model, data, kq)
+        if dt != self._dt:
+            self._new_dt(dt)
+        if self.posture._weights is not self._posture_weights:
+            self._new_posture_weights()
+        moving = False
+        for task, fid, A6, b6, bff6, A_pos, A_rot, b_pos, b_rot in self._frames:
+            if task._unit and task.gain == 1.0:
+                if task.target is None:
+                    task._require_target()
+                placement = _frame_placement(model, data, fid)
+                target = task._target
+                Mt = np.dot(target[:3, :3], placement.rotation.T)  # R* Rᵀ
+                J = _frame_jacobian(model, data, fid, LOCAL_WORLD_ALIGNED)
+                JlogT = _Jlog3(Mt)
+                np.dot(JlogT, J[3:], out=A_rot)
+                A_pos[:] = J[:3]
+                np.subtract(target[:3, 3], placement.translation, out=b_pos)
+                b_rot[:] = _log3(Mt)
+                task._M = Mt.T  # for the feed-forward of a rotating target
+                task._JlogT = JlogT
+            else:
+                _frame_placement(model, data, fid)  # fill and the frame Jacobian read data.oMf
+                task.fill(kin, A6, b6)
+            code = task.feedforward(dt, bff6)
+            if code:
+                moving = True
+                if code == 2:  # explicit target velocity: the step aims at where the target will be
+                    b6 += bff6 * dt
+        H = self._H
+        AT = self._AT
+        np.dot(AT, self._A, out=H)
+        H += self._diagonal
+        rhs0 = self._rhs0  # -c dt: Aᵀb of the frame rows plus the posture rows
+        np.dot(AT, self._b, out=rhs0)
+        tmp = self._tmp
+        np.subtract(self.posture.target, kq, out=tmp)
+        tmp *= self._posture_gain
+        rhs0 += tmp
+        rhs0 *= 1.0 / dt
+        c = self._c
+        np.negative(rhs0, out=c)
+        v_free, v_ff = self._v_free, self._v_ff
+        problem = self.problem
+        if moving:
+            np.dot(AT, self._b_ff, out=self._rhs1)  # -c_ff
+            _, x, info = _dposv(H.T, self._rhs)  # H is symmetric: H.T is the Fortran-ordered view LAPACK wants
+            if info == 0:
+                v_free[:] = x[:, 0]
+                v_ff[:] = x[:, 1]
+                problem.minimiser_exact = True
+            else:
+                np.negative(self._rhs1, out=self._c_ff)
+                _free_velocity(H, self._c_ff, v_ff)
+                problem.minimiser_exact = _free_velocity(H, c, v_free)
+        else:
+            _, x, info = _dposv(H.T, rhs0)
+            if info == 0:
+                v_free[:] = x
+                problem.minimiser_exact = True
+            else:
+                problem.minimiser_exact = _free_velocity(H, c, v_free)
+        v_prev_buffer = self._v_prev
+        if v_prev is None:
+            v_prev_buffer.fill(0.0)
+        else:
+            v_prev_buffer[:] = v_prev
+        scale = self._box_layers(kq, v_prev_buffer, moving, dt)
+        box = self._box
+        np.minimum.reduce(self._stack, axis=0, out=box)
+        width = self._width
+        np.add(box[0], box[1], out=width)  # upper - lower
+        if np.count_nonzero(np.less(width, 0.0, out=self._neg)):  # a layer must be relaxed: the sequential way
+            stack, scratch = self._stack, self._scratch
+            np.copyto(box, stack[0])
+            for k in range(1, stack.shape[0]):
+                intersect_stacked(box, stack[k], scratch)
+        np.negative(box[1], out=self._lower)
+        minimiser = self._minimiser
+        if scale != 1.0 and moving:  # scale the part relative to the target's motion: v_ff + κ (v_free - v_ff)
+            c_ff = self._c_ff
+            np.negative(self._rhs1, out=c_ff)
+            c -= c_ff
+            c *= scale
+            c += c_ff
+            np.subtract(v_free, v_ff, out=minimiser)
+            minimiser *= scale
+            minimiser += v_ff
+        elif scale != 1.0:
+            c *= scale
+            np.multiply(v_free, scale, out=minimiser)
+        else:
+            minimiser[:] = v_free
+        problem.dt = dt
+        k = 0
+        if self.collision is not None:
+            ctx = self._ctx
+            ctx.dt = dt
+            ctx.moving = moving
+            k = self.collision.rows(ctx, self._G, self._h)
+        if problem.h.shape[0] != k:
+            problem.G = self._G[:k]
+            problem.h = self._h[:k]
+        return problem
+
+    def _box_layers(self, q: np.ndarray, v_prev: np.ndarray, moving: bool, dt: float) -> float:
+        """Write the acceleration, position and braking layers (the velocity layer is constant); return the
+        objective scale κ of target braking (1 without it)."""
+        acc_out = self._acc_out
+        if acc_out is not None:  # v_prev ± a dt
+            np.multiply(_SIGN, v_prev, out=acc_out)
+            acc_out += self._acc_step
+        position = self.position
+        D, out = self._distance, self._pos_out
+        np.multiply(_SIGN, q, out=D)
+        np.subtract(position._range, D, out=D)
+        if acc_out is None:
+            np.multiply(D, position.gain / dt, out=out)
+        elif not np.count_nonzero(np.less(D, 0.0, out=self._outside)):  # inside the range: braking bound
+            np.multiply(D, position._two_a, out=out)
+            out += self._pos_adt2
+            np.sqrt(out, out=out)
+            out -= self._pos_adt
+        else:  # outside: the general formula
+            self._ctx.dt = dt
+            out[:] = position.stacked(self._ctx)
+        out = self._brake_out
+        if out is None:
+            return 1.0
+        if moving:
+            relative = self._relative
+            np.subtract(self._v_free, self._v_ff, out=relative)
+        else:
+            relative = self._v_free
+        speed, ratio = self._speed, self._ratio
+        np.abs(relative, out=speed)
+        # bound / speed = 2 a dt / (sqrt(a² dt² + 2 a dt speed) + a dt), as in TargetBraking
+        np.multiply(speed, self._brake_two_a_dt, out=ratio)
+        ratio += self._brake_adt2
+        np.sqrt(ratio, out=ratio)
+        ratio += self._brake_adt
+        np.divide(self._brake_two_adt, ratio, out=ratio)
+        kappa = min(ratio.tolist())
+        np.multiply(ratio, speed, out=out[0])
+        out[1] = out[0]
+        away = self._away  # moving away from the target: no bound on that side
+        np.less(relative, 0.0, out=away[0])
+        np.greater(relative, 0.0, out=away[1])
+        np.copyto(out, _INF, where=away)
+        if moving:
+            signed = self._ff_signed
+            np.multiply(_SIGN, self._v_ff, out=signed)
+            out += signed
+        return 1.0 if kappa >= 1.0 else kappa * (1.0 - 1e-12)
