@@ -10,7 +10,7 @@ import ruckig
 
 from taplan.stream import JointStreamer, stopping_range
 from taplan.stream._ruckig import profile_range
-from taplan.stream.joint_streamer import _stop_fits
+from taplan.stream.joint_streamer import _stop_fits, _stop_rows
 from taplan.stream.safety import stop_excursion
 from taplan.stream.sweep import StreamRecord, random_scenario, run_scenario, stream_violations
 
@@ -62,7 +62,7 @@ def test_stop_screen_is_conservative(rng):
 
 
 def test_stop_fits_matches_the_exact_rule(rng):
-    rows = [(-1.0, 1.0, 20.0, 200.0, 0.5 / 200.0, 1.0 / 200.0, 2.0 * 20.0 / 200.0, 1.0 / 20.0)]
+    rows = _stop_rows([-1.0], [1.0], [20.0], [200.0])
     for _ in range(3000):
         v, a = rng.uniform(-4.0, 4.0), rng.uniform(-20.0, 20.0)
         reachable = np.sqrt(2.0 * 200.0 * (4.0 - abs(v)))

@@ -42,6 +42,8 @@ POSITION_TOLERANCE = 1e-7  # [rad]: slack over ruckig's position accuracy (1e-8)
 _SPEED_MARGIN = 1.0 - 1e-6  # keep admitted target speeds strictly inside the braking-room bound
 
 _POSITION, _BRAKE = 0, 1
+_array = np.array
+_new_tuple = tuple.__new__
 
 
 class JointStreamer:
@@ -109,12 +111,7 @@ class JointStreamer:
         self._upper_list = self._upper.tolist()
         self._vmax_list = self._vmax.tolist()
         self._speed_rows = _speed_rows(limits, self.dt)
-        self._stop_rows = [
-            (low, high, amax, jmax, 0.5 / jmax, 1.0 / jmax, 2.0 * amax / jmax, 1.0 / amax)
-            for low, high, amax, jmax in zip(
-                self._lower_list, self._upper_list, limits.acceleration.tolist(), limits.jerk.tolist(), strict=True
-            )
-        ]
+        self._stop_rows = _stop_rows(self._lower_list, self._upper_list, limits.acceleration, limits.jerk)
         self._unchecked = False  # the trajectory being followed was vouched for over its first period only
         self._retargeting = False  # the last step computed a new trajectory
         self._shape = (self.n,)
@@ -375,20 +372,22 @@ class JointStreamer:
             result = self._brake_now()
         out = adapter.out
         new_calculation = out.new_calculation
-        new_position = out.new_position
+        # each ruckig output attribute is a fresh list converted from C++: read each once
+        new_position, new_velocity, new_acceleration = out.new_position, out.new_velocity, out.new_acceleration
+        vouched = False
         if new_calculation:
             # Vouch for the first period: the emitted state inside the bounds with its shortest stop inside them
             # too. The trajectory's whole range is checked only if a second period of it is ever emitted (below):
             # a stream that retargets every period never pays for that check.
             # Vouching pays off only for a stream that retargets every period (the previous step computed too);
             # otherwise the whole check would merely move to the next period.
-            self._unchecked = self._retargeting and _stop_fits(
-                new_position, out.new_velocity, out.new_acceleration, self._stop_rows
+            vouched = self._unchecked = self._retargeting and _stop_fits(
+                new_position, new_velocity, new_acceleration, self._stop_rows
             )
             # a new target at rest ends inside the bounds (admitted there): its end state needs no check
-            if not self._unchecked and adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
+            if not vouched and adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
                 result = self._fallback(result)
-                new_position = out.new_position
+                new_position, new_velocity, new_acceleration = out.new_position, out.new_velocity, out.new_acceleration
         elif self._unchecked:
             # following a vouched-for trajectory beyond its first period: check it whole now; on failure, restart
             # from the last emitted state (vouched for: its stop fits), as for a new trajectory
@@ -396,15 +395,13 @@ class JointStreamer:
             if adapter.leaves_bounds(check_end=self._mode == _BRAKE or self._target_moving):
                 result = self._fallback(result)
                 new_calculation = True
-                new_position = out.new_position
+                new_position, new_velocity, new_acceleration = out.new_position, out.new_velocity, out.new_acceleration
         self._retargeting = new_calculation
-        position = np.array(new_position)
-        velocity = np.array(out.new_velocity)
-        acceleration = np.array(out.new_acceleration)
-        jerk = np.array(out.new_jerk)
-        # ruckig's slack: at most POSITION_TOLERANCE (np.clip's wrapper costs twice these two ufuncs)
-        np.minimum(position, self._upper, out=position)
-        np.maximum(position, self._lower, out=position)
+        position = _array(new_position, float)
+        if not vouched:  # (a vouched-for position is inside the bounds already)
+            # ruckig's slack: at most POSITION_TOLERANCE (np.clip's wrapper costs twice these two ufuncs)
+            np.minimum(position, self._upper, out=position)
+            np.maximum(position, self._lower, out=position)
         out.pass_to_input(adapter.inp)
         if self._mode == _POSITION:
             if result == FINISHED:
@@ -420,19 +417,23 @@ class JointStreamer:
             status = StreamStatus.STOPPED if result == FINISHED else StreamStatus.STOPPING
         if fault is not None:
             self.last_fault = fault
-        self._time += self.dt
-        self._state = StreamState(
-            self._time,
-            position,
-            velocity,
-            acceleration,
-            jerk,
-            status,
-            new_calculation,
-            self._target_adjusted,
-            fault,
+        self._time = now = self._time + self.dt
+        # tuple.__new__: the NamedTuple's own __new__ is a Python-level wrapper around it
+        self._state = state = _new_tuple(
+            StreamState,
+            (
+                now,
+                position,
+                _array(new_velocity, float),
+                _array(new_acceleration, float),
+                _array(out.new_jerk, float),
+                status,
+                new_calculation,
+                self._target_adjusted,
+                fault,
+            ),
         )
-        return self._state
+        return state
 
     # ------------------------------------------------------------------ internals
     def _brake_now(self) -> int:
@@ -482,21 +483,35 @@ def _stop_fits(
     A cheap screen first: the stop never moves faster than ``s = |v| + a^2 / (2 j)`` and lasts at most
     ``|a| / j + 2 amax / j + s / amax`` (jerk phases of at most ``(|a| + amax) / j`` and ``amax / j``, a hold that
     changes the velocity by at most ``s``), so its excursion is at most ``s`` times that; only a joint nearer a
-    bound than this is given the exact closed form.
+    bound than this is given the exact closed form. ``rows`` come from :func:`_stop_rows`.
     """
-    for p, v, a, (low, high, amax, jmax, half_inv_j, inv_j, two_a_over_j, inv_a) in zip(
+    for p, v, a, (inner_low, inner_high, half_inv_j, inv_j, two_a_over_j, inv_a, low, high, amax, jmax) in zip(
         position, velocity, acceleration, rows, strict=True
     ):
+        speed = abs(v) + a * a * half_inv_j
+        reach = speed * (abs(a) * inv_j + two_a_over_j + speed * inv_a)
+        if inner_low + reach <= p <= inner_high - reach:  # inside the bounds (less the margin) with the stop
+            continue
         if not low <= p <= high:
             return False
-        speed = abs(v) + a * a * half_inv_j
-        reach = speed * (abs(a) * inv_j + two_a_over_j + speed * inv_a) + _STOP_MARGIN
-        if low + reach <= p <= high - reach:
-            continue
         down, up = stop_excursion(v, a, amax, jmax)
         if not (p + down >= low + _STOP_MARGIN and p + up <= high - _STOP_MARGIN):
             return False
     return True
+
+
+def _stop_rows(
+    lower: list[float], upper: list[float], acceleration: npt.ArrayLike, jerk: npt.ArrayLike
+) -> list[tuple[float, ...]]:
+    """Per joint, what :func:`_stop_fits` needs: the bounds less the margin, the screen's factors, the bounds, the
+    acceleration and jerk limits (plain floats: a 14-element Python loop beats small numpy calls)."""
+    return [
+        (low + _STOP_MARGIN, high - _STOP_MARGIN, 0.5 / jmax, 1.0 / jmax, 2.0 * amax / jmax, 1.0 / amax, low, high)
+        + (amax, jmax)
+        for low, high, amax, jmax in zip(
+            lower, upper, np.asarray(acceleration, float).tolist(), np.asarray(jerk, float).tolist(), strict=True
+        )
+    ]
 
 
 def _speed_rows(limits: JointLimits, dt: float) -> list[tuple[float, ...]]:

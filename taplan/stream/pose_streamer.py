@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping, Sequence
-from operator import mul, sub
+from operator import sub
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
@@ -68,6 +68,7 @@ class PoseStreamState(NamedTuple):
 
 
 _DEFAULT_POSTURE_COST = 1e-4  # [1/rad]: see PoseStreamer (the IK's own default, 1e-2, stops ~6 mm short)
+_new_tuple = tuple.__new__
 _SETTLE_SPEED = 1e-3  # [rad]/[s]: an IK step slower than this on a reached pose holds the joints at rest
 
 
@@ -144,8 +145,9 @@ class PoseStreamer:
         self._history: dict[str, deque[tuple[float, list[float]]]] = {
             f: deque(maxlen=self._window) for f in self.frames
         }
-        # per frame: target position [m] (3 floats), rotation (9 floats, row-major) and top 3 rows of the 4x4
-        self._targets: dict[str, tuple[list[float], list[float], list[float]]] = {}
+        # per frame: the top 3 rows of the target's 4x4, row-major (12 floats: rotation and position [m])
+        self._targets: dict[str, list[float]] = {}
+        self._restart_distance = 0.1 * self.tolerance[0]  # [m]: a target that moves more restarts its stall window
         self.joints = JointStreamer(
             limits, self.dt, timeout=None, on_out_of_bounds="clamp", synchronization=synchronization
         )
@@ -187,9 +189,11 @@ class PoseStreamer:
         """
         if not (type(targets) is dict or isinstance(targets, Mapping)) or not targets:
             raise StreamError(f"pose targets: expected a non-empty mapping {{frame: pose}}, received {targets!r:.80}")
-        checked = []
+        frame_ids = self._frame_ids
+        checked: dict[str, np.ndarray] = {}  # frame -> validated 4x4 (a copy: the caller may reuse its array)
+        flats = []
         for frame, pose in targets.items():
-            if frame not in self._frame_ids:
+            if frame not in frame_ids:
                 raise StreamError(f"{UnknownNameError('task frame', frame, self.frames)}; the target was rejected")
             flat = _fast_transform(pose)
             if flat is None:
@@ -202,22 +206,21 @@ class PoseStreamer:
                 flat = T[:3].ravel().tolist()
             else:
                 T = pose.copy()
-            checked.append((frame, T, flat))
-        self.joints.state  # noqa: B018 (raises before reset)
-        tol_p = 0.1 * self.tolerance[0]
+            checked[frame] = T
+            flats.append((frame, flat))
+        state = self.joints.state  # raises before reset
         stored = self._targets
-        for frame, _, flat in checked:
+        for frame, flat in flats:
             previous = stored.get(frame)
-            if previous is None or flat != previous[2]:
+            if previous != flat:
                 self._holding = False  # any change resumes tracking
-                if previous is None or max(map(abs, map(sub, flat, previous[2]))) > tol_p:
+                if previous is None or max(map(abs, map(sub, flat, previous))) > self._restart_distance:
                     self._history[frame].clear()  # a target that moved restarts its progress window
-            stored[frame] = ([flat[3], flat[7], flat[11]], flat[0:3] + flat[4:7] + flat[8:11], flat)
+                stored[frame] = flat
         if not self._active:  # resume from where the joint stream is, with its velocity (acceleration limit state)
-            state = self.joints.state
             self.ik.reset(state.position, state.velocity)
             self._holding = False
-        self.ik.set_targets({frame: T for frame, T, _ in checked})
+        self.ik.set_targets(checked)
         self._active = True
         self._watchdog.feed(self.joints.time)
 
@@ -240,15 +243,27 @@ class PoseStreamer:
         # errors at the IK step's start configuration (its kinematics are evaluated there; while holding, at the
         # held configuration)
         oMf = self.ik.kin.data.oMf
+        frame_ids = self._frame_ids
         tol_p, tol_r = self.tolerance
         position_error: dict[str, float] = {}
         orientation_error: dict[str, float] = {}
         pose_reached = True
-        for frame, (p_target, R_target, _) in self._targets.items():
-            r0, r1, r2, _ = oMf[self._frame_ids[frame]].homogeneous.tolist()
-            e_p = math.dist((r0[3], r1[3], r2[3]), p_target)
+        for frame, t in self._targets.items():  # t: the target's top 3 rows, row-major
+            r0, r1, r2, _ = oMf[frame_ids[frame]].homogeneous.tolist()
+            e_p = math.dist((r0[3], r1[3], r2[3]), (t[3], t[7], t[11]))
             # trace(R R*^T) = sum of elementwise products = 1 + 2 cos(angle) (acos resolves ~1e-8 [rad] near 0)
-            cosine = 0.5 * (sum(map(mul, r0[:3] + r1[:3] + r2[:3], R_target)) - 1.0)
+            cosine = 0.5 * (
+                r0[0] * t[0]
+                + r0[1] * t[1]
+                + r0[2] * t[2]
+                + r1[0] * t[4]
+                + r1[1] * t[5]
+                + r1[2] * t[6]
+                + r2[0] * t[8]
+                + r2[1] * t[9]
+                + r2[2] * t[10]
+                - 1.0
+            )
             e_r = math.acos(min(1.0, max(-1.0, cosine)))
             position_error[frame] = e_p
             orientation_error[frame] = e_r
@@ -267,18 +282,20 @@ class PoseStreamer:
         ):
             joints.set_target(self.ik.kin.q)  # hold the reached configuration at rest
             self._holding = True
+        # tuple.__new__: the NamedTuple's own __new__ is a Python-level wrapper around it
         state = joints.step()
-        return PoseStreamState(*state, position_error, orientation_error, pose_reached, unreachable)
+        return _new_tuple(PoseStreamState, (*state, position_error, orientation_error, pose_reached, unreachable))
 
     def _stalled(self, position_error: dict[str, float], orientation_error: dict[str, float]) -> tuple[str, ...]:
         """Frames outside the tolerance whose error and joints have not moved over the stall window."""
         tol_p, tol_r = self.tolerance
-        q = self.ik.kin.q
+        q = self.ik.kin.q.tolist()
         stalled = []
         for frame, e_p in position_error.items():
             score = max(e_p / tol_p, orientation_error[frame] / tol_r)  # > 1: outside the tolerance
             history = self._history[frame]
-            joints_q = q[self._frame_joints[frame]].tolist()
+            joints = self._frame_joints[frame]
+            joints_q = q[joints] if type(joints) is slice else [q[i] for i in joints]
             history.append((score, joints_q))
             if score <= 1.0 or len(history) < self._window:
                 continue
@@ -288,11 +305,11 @@ class PoseStreamer:
         return tuple(stalled)
 
 
-def _index(indices: np.ndarray) -> np.ndarray | slice:
-    """A slice for contiguous indices (a view, cheaper than fancy indexing), else the indices."""
+def _index(indices: np.ndarray) -> list[int] | slice:
+    """A slice for contiguous indices (cheaper to take from a list), else the indices."""
     if indices.size and np.array_equal(indices, np.arange(indices[0], indices[0] + indices.size)):
         return slice(int(indices[0]), int(indices[0]) + indices.size)
-    return indices
+    return indices.tolist()
 
 
 def _supporting_joints(model: Any, frame_id: int) -> np.ndarray:
