@@ -1,4 +1,4 @@
-"""Converge-to-pose: iterate the QP (Levenberg-Marquardt steps within the joint limits) until the targets are met."""
+"""Converge-to-pose: second-order Levenberg-Marquardt steps within the joint limits until the targets are met."""
 
 from __future__ import annotations
 
@@ -8,20 +8,22 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pinocchio as pin
 
 from taplan.errors import InvalidInputError, UnknownNameError
 from taplan.ik._kinematics import Kinematics
+from taplan.ik._pose_step import PoseStep
 from taplan.ik._targets import as_transform
-from taplan.ik.limits import CollisionLimit, PositionLimit, VelocityLimit
-from taplan.ik.limits.limit import BoxLimit, RowLimit
-from taplan.ik.problem import ProblemBuilder, project
+from taplan.ik.limits import CollisionLimit
 from taplan.ik.solvers import QPSolver, get_solver
-from taplan.ik.tasks import FrameTask, PostureTask
-from taplan.ik.tasks.task import Task
 from taplan.limits import JointLimits
 from taplan.robot import Robot
 
 __all__ = ["IKResult", "solve_pose"]
+
+_ACCEPT = 1.0  # largest ‖second-order correction‖ / ‖step‖ kept
+_PROGRESS = 0.999  # an iteration that does not cut the normalised error below this fraction of the last...
+_STALL = 5  # ... this many times in a row ends the attempt
 
 
 @dataclass
@@ -33,7 +35,8 @@ class IKResult:
         success: Every target met within the tolerance (never True otherwise).
         position_error: Per frame, distance to the target position [m].
         orientation_error: Per frame, rotation angle to the target orientation [rad].
-        iterations: QP iterations used in total (over all restarts).
+        iterations: Steps used in total (over all restarts); each evaluates the kinematics once and solves at most
+            one QP.
         restarts: Random restarts used.
     """
 
@@ -53,20 +56,25 @@ def solve_pose(
     limits: JointLimits | None = None,
     tolerance: tuple[float, float] = (1e-3, 1e-2),
     max_iterations: int = 100,
-    max_step: float = 1.0,
-    posture_cost: float = 1e-3,
+    max_step: float = 1.5,
+    posture_cost: float = 1e-5,
     restarts: int = 10,
     collision: bool = False,
     solver: str | QPSolver = "proxqp",
     seed: int = 0,
     lm_damping: float = 1e-3,
+    second_order: bool = True,
 ) -> IKResult:
     """Find a configuration that puts each frame at its target pose.
 
-    Gauss-Newton steps with Levenberg-Marquardt damping proportional to the squared error, each a QP that keeps the
-    configuration within the position limits (and optionally the arms apart) and moves each joint by at most
-    ``max_step``. When an attempt stalls or runs out of iterations, it restarts from a random configuration within
-    the limits (seeded), up to ``restarts`` times. Joints that no target depends on stay near ``q0`` (posture task).
+    Damped Gauss-Newton (Levenberg-Marquardt) steps on the SE(3) error ``log6(T*⁻¹ T)`` of each frame, with damping
+    proportional to the squared error (it vanishes at the solution: quadratic convergence in the last steps) and,
+    by default, a second-order (geodesic-acceleration) correction computed from the same kinematics evaluation
+    (see :mod:`taplan.ik._pose_step`). Each step is a QP that keeps the configuration within the position limits
+    (and optionally the arms apart) and moves each joint by at most ``max_step``. When an attempt stalls or runs out
+    of iterations, it restarts from a random configuration within the limits (seeded) for the joints the targets
+    depend on, up to ``restarts`` times. Joints that no target depends on stay at ``q0`` (posture task); among
+    the solutions of a redundant arm the posture task prefers those near ``q0``.
 
     Args:
         robot: The robot.
@@ -74,21 +82,24 @@ def solve_pose(
         q0: Initial configuration [rad] (nq,); default ``robot.home``. Clipped into the limits.
         limits: Joint limits (position bounds used); default ``robot.planning_limits``.
         tolerance: (position [m], orientation [rad]) that counts as reached.
-        max_iterations: QP iterations per attempt.
+        max_iterations: Iterations (steps) per attempt.
         max_step: Largest joint change per iteration [rad].
         posture_cost: Cost per [rad] toward ``q0``.
         restarts: Random restarts after a failed attempt.
         collision: Keep the arms' capsules apart (dual-arm robots).
-        solver: QP backend.
+        solver: QP backend (used when a limit binds).
         seed: Seed of the restarts' random configurations.
         lm_damping: Levenberg-Marquardt damping per squared error ([m²] + [rad²]).
+        second_order: Correct each step for the kinematics' curvature (one kinematics evaluation per step either
+            way; False gives plain damped Gauss-Newton steps).
 
     Returns:
-        The result; ``success`` is True only if every error is within ``tolerance``.
+        The result; ``success`` is True only if every error is within ``tolerance``. ``iterations`` counts every
+        step (each one kinematics evaluation with Jacobians and at most one QP) over all attempts.
 
     Raises:
         UnknownNameError: an unknown frame.
-        InvalidInputError: malformed targets, q0 or tolerance.
+        InvalidInputError: malformed targets, q0, tolerance or options.
     """
     if not isinstance(targets, Mapping) or not targets:
         raise InvalidInputError("targets", targets, "a non-empty mapping {frame name: pose}")
@@ -101,71 +112,95 @@ def solve_pose(
         raise InvalidInputError("tolerance", tolerance, "(position [m], orientation [rad])") from None
     if not (tol_p > 0 and tol_r > 0 and np.isfinite(tol_p) and np.isfinite(tol_r)):
         raise InvalidInputError("tolerance", tolerance, "two finite numbers > 0")
-    if int(max_iterations) < 1:
-        raise InvalidInputError("max_iterations", max_iterations, "an integer >= 1")
+    max_iterations = _count(max_iterations, "max_iterations", 1)
+    restarts = _count(restarts, "restarts", 0)
+    max_step = _number(max_step, "max_step", positive=True)
+    posture_cost = _number(posture_cost, "posture_cost")
+    lm_damping = _number(lm_damping, "lm_damping")
     q_start = robot.home if q0 is None else robot.check_configuration(q0, "q0")
     q_start = np.clip(q_start, limits.lower, limits.upper)
 
-    kin = Kinematics(robot.model)
-    tasks: list[FrameTask] = []
+    frame_ids, goals = [], []
     for frame, target in targets.items():
         if not isinstance(frame, str) or not robot.model.existFrame(frame):
             raise UnknownNameError("frame", frame, robot.frame_names)
-        task = FrameTask(robot.frame_id(frame), 1.0, 1.0, name=frame)
-        task.set_target(as_transform(target, f"targets[{frame!r}]"))
-        tasks.append(task)
-    posture = PostureTask(robot.nq, posture_cost, q_start)
-    lims: list[BoxLimit | RowLimit] = [
-        PositionLimit(limits.lower, limits.upper, gain=1.0),
-        VelocityLimit(np.full(robot.nq, float(max_step))),
-    ]
+        T = as_transform(target, f"targets[{frame!r}]")
+        frame_ids.append(robot.frame_id(frame))
+        goals.append(pin.SE3(T[:3, :3].copy(), T[:3, 3].copy()))
+    names = list(targets)
+    rows = []
     if collision and {"left", "right"} <= set(robot.groups):
-        lims.append(CollisionLimit(robot.capsule_pairs("left", "right"), robot.model, gain=0.5))
-    all_tasks: list[Task] = [*tasks, posture]
-    builder = ProblemBuilder(kin, all_tasks, lims, damping=1e-9)
+        rows.append(CollisionLimit(robot.capsule_pairs("left", "right"), robot.model, gain=0.5))
     backend = get_solver(solver) if isinstance(solver, str) else solver
+    kin = Kinematics(robot.model)
+    stepper = PoseStep(
+        kin,
+        frame_ids,
+        goals,
+        limits.lower,
+        limits.upper,
+        max_step,
+        posture_cost,
+        q_start,
+        lm_damping,
+        second_order,
+        _ACCEPT,
+        rows,
+        backend,
+    )
+    moving = _dependent_joints(robot.model, frame_ids)
     rng = np.random.default_rng(seed)
 
     best_q, best_cost, best_err = q_start.copy(), np.inf, ({}, {})
     iterations = 0
     q = q_start.copy()
-    for attempt in range(int(restarts) + 1):
+    for attempt in range(restarts + 1):
         if attempt:
-            q = rng.uniform(limits.lower, limits.upper)
+            q = q_start.copy()
+            q[moving] = rng.uniform(limits.lower[moving], limits.upper[moving])
+            for lim in rows:
+                lim.reset()
         previous = np.inf
         stall = 0
-        for step in range(int(max_iterations) + 1):  # the last pass only evaluates the final configuration
-            kin.update(q)
-            pos, rot, cost = _errors(kin, tasks, tol_p, tol_r)
+        for step in range(max_iterations + 1):  # the last pass only evaluates the final configuration
+            p, r = stepper.evaluate(q)
+            pos, rot = dict(zip(names, p, strict=True)), dict(zip(names, r, strict=True))
+            if all(x <= tol_p for x in p) and all(x <= tol_r for x in r):
+                return IKResult(q.copy(), True, pos, rot, iterations, attempt)
+            cost = float(np.sqrt(sum((x / tol_p) ** 2 for x in p) + sum((x / tol_r) ** 2 for x in r)))
             if cost < best_cost:
                 best_q, best_cost, best_err = q.copy(), cost, (pos, rot)
-            if all(pos[f] <= tol_p for f in pos) and all(rot[f] <= tol_r for f in rot):
-                return IKResult(q.copy(), True, pos, rot, iterations, attempt)
-            stall = stall + 1 if cost > 0.999 * previous else 0
-            if stall >= 5 or step == int(max_iterations):
+            stall = stall + 1 if cost > _PROGRESS * previous else 0
+            if stall >= _STALL or step == max_iterations:
                 break
             previous = cost
-            builder.damping = 1e-9 + lm_damping * _squared_error(kin, tasks)  # Levenberg-Marquardt
-            problem = builder.build(q, 1.0)
-            v = project(problem, backend.solve(problem))
-            q = q + v
+            q = np.clip(q + stepper.step(), limits.lower, limits.upper)
             iterations += 1
-    return IKResult(best_q, False, best_err[0], best_err[1], iterations, int(restarts))
+    return IKResult(best_q, False, best_err[0], best_err[1], iterations, restarts)
 
 
-def _errors(
-    kin: Kinematics, tasks: list[FrameTask], tol_p: float, tol_r: float
-) -> tuple[dict[str, float], dict[str, float], float]:
-    """Per-frame errors and a scalar progress measure (errors normalised by their tolerances, squared)."""
-    pos, rot = {}, {}
-    cost = 0.0
-    for task in tasks:
-        e = task.compute_error(kin)
-        p, r = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
-        pos[task.name], rot[task.name] = p, r
-        cost += (p / tol_p) ** 2 + (r / tol_r) ** 2
-    return pos, rot, float(np.sqrt(cost))
+def _dependent_joints(model: pin.Model, frame_ids: list[int]) -> np.ndarray:
+    """Indices of the velocity variables that move at least one of the frames (their supporting joints)."""
+    out: set[int] = set()
+    for fid in frame_ids:
+        for j in model.supports[model.frames[fid].parentJoint]:
+            if j > 0:
+                start = model.joints[j].idx_v
+                out.update(range(start, start + model.joints[j].nv))
+    return np.array(sorted(out), dtype=int)
 
 
-def _squared_error(kin: Kinematics, tasks: list[FrameTask]) -> float:
-    return float(sum(np.dot(e, e) for e in (t.compute_error(kin) for t in tasks)))
+def _count(value: Any, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise InvalidInputError(name, value, f"an integer >= {minimum}")
+    return int(value)
+
+
+def _number(value: Any, name: str, positive: bool = False) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        x = np.nan
+    if not np.isfinite(x) or x < 0 or (positive and x == 0):
+        raise InvalidInputError(name, value, "a finite number > 0" if positive else "a finite number >= 0")
+    return x
