@@ -121,3 +121,35 @@ def test_extra_tasks_or_limits_use_the_generic_builder(robot):
 
     ik = DifferentialIK(robot, extra_tasks=[DampingTask(robot.nq, 1e-3)])
     assert isinstance(ik.builder, ProblemBuilder)
+
+
+def test_hot_path_validates_every_matrix_target(robot):
+    from taplan.errors import InvalidInputError
+
+    ik = DifferentialIK(robot)
+    good = robot.frame_pose(robot.home, "left_ee")
+    ik.step({"left_ee": good})  # the rotation block is now known: later targets with it check the translation only
+    bad_cases = {
+        "nan translation": (0, 3, np.nan),
+        "inf translation": (2, 3, np.inf),
+        "nan rotation": (1, 1, np.nan),
+        "scaled rotation": (0, 0, 2.0 * good[0, 0] + 0.5),
+        "last row": (3, 0, 0.1),
+    }
+    for label, (i, j, value) in bad_cases.items():
+        T = good.copy()
+        T[i, j] = value
+        with pytest.raises(InvalidInputError, match=r"targets\['left_ee'\]"):
+            ik.step({"left_ee": T})
+        assert np.array_equal(ik.tasks["left_ee"].target, good), label  # the last good target is kept
+    reflection = good.copy()
+    reflection[:3, 0] *= -1.0  # orthonormal, determinant -1
+    with pytest.raises(InvalidInputError, match="rotation"):
+        ik.step({"left_ee": reflection})
+    rotated = good.copy()
+    rotated[:3, :3] = pin.exp3(np.array([0.0, 0.0, 0.2])) @ good[:3, :3]
+    ik.step({"left_ee": rotated})  # a new valid rotation is accepted
+    assert np.array_equal(ik.tasks["left_ee"].target, rotated)
+    fortran = np.asfortranarray(good)  # memory order does not matter
+    ik.step({"left_ee": fortran})
+    assert np.array_equal(ik.tasks["left_ee"].target, good)

@@ -105,19 +105,23 @@ class FusedBuilder:
         self._scratch = np.zeros((2, n))
         self._width = np.zeros(n)
         self._neg = np.zeros(n, dtype=bool)
-        self._distance = np.zeros((2, n))
         self._outside = np.zeros((2, n), dtype=bool)
         self._relative = np.zeros(n)
-        self._speed = np.zeros(n)
         self._ratio = np.zeros(n)
         self._away = np.zeros((2, n), dtype=bool)
-        self._ff_signed = np.zeros((2, n))
+        k = 1 if braking is None else 2  # layers sharing the braking formula: position (and target braking)
+        self._X = np.zeros((k, 2, n))
+        self._T = np.zeros((k, 2, n))
+        self._S = np.zeros((k, 2, n))
+        self._upper_bound, self._lower_bound = position.upper, position.lower
         self._lower = np.zeros(n)
         self._upper = self._box[0]
         layer = {id(lim): self._stack[k] for k, lim in enumerate(self.box_limits)}
         self._acc_out = None if acceleration is None else layer[id(acceleration)]
         self._pos_out = layer[id(position)]
         self._brake_out = None if braking is None else layer[id(braking)]
+        index = self.box_limits.index(position)  # position and braking layers are adjacent (priorities 20, 30)
+        self._braking_out = self._stack[index : index + k]
         layer[id(velocity)][:] = velocity.velocity  # constant: [v_max, v_max]
         self._dt = -1.0
         self._posture_weights: np.ndarray | None = None
@@ -155,17 +159,19 @@ class FusedBuilder:
 
     def _new_dt(self, dt: float) -> None:
         self._dt = dt
-        if self.acceleration is not None:
-            self._acc_step = np.tile(self.acceleration.acceleration * dt, (2, 1))
-            two_a = self.position._two_a
-            self._pos_adt = 0.5 * two_a * dt
-            self._pos_adt2 = self._pos_adt * self._pos_adt
+        if self.acceleration is None:
+            return
+        self._adt_vec = self.acceleration.acceleration * dt
+        rows = [self.position.acceleration]
         if self.braking is not None:
-            a = self.braking.acceleration
-            self._brake_adt = a * dt
-            self._brake_adt2 = self._brake_adt * self._brake_adt
-            self._brake_two_a_dt = 2.0 * a * dt
-            self._brake_two_adt = 2.0 * self._brake_adt
+            rows.append(self.braking.acceleration)
+        a = np.stack([np.stack([r, r]) for r in rows])  # (k, 2, nv)
+        self._K = 2.0 * a
+        if self.braking is not None:
+            self._K[1] *= dt
+            self._brake_two_adt = 2.0 * self.braking.acceleration * dt
+        self._adt = a * dt
+        self._adt2 = self._adt * self._adt
 
     def _new_posture_weights(self) -> None:
         w = self.posture._weights
@@ -286,50 +292,52 @@ class FusedBuilder:
 
     def _box_layers(self, q: np.ndarray, v_prev: np.ndarray, moving: bool, dt: float) -> float:
         """Write the acceleration, position and braking layers (the velocity layer is constant); return the
-        objective scale κ of target braking (1 without it)."""
+        objective scale κ of target braking (1 without it).
+
+        Position braking (distance ``D`` to each bound) and target braking (speed ``|v_free - v_ff|`` toward the
+        target) share one formula, ``2aX / (sqrt(2aX + (a dt)²) + a dt)`` with ``X = D`` or ``X = speed dt``, so
+        both are computed together on one (2k, nv) array.
+        """
         acc_out = self._acc_out
-        if acc_out is not None:  # v_prev ± a dt
-            np.multiply(_SIGN, v_prev, out=acc_out)
-            acc_out += self._acc_step
-        position = self.position
-        D, out = self._distance, self._pos_out
-        np.multiply(_SIGN, q, out=D)
-        np.subtract(position._range, D, out=D)
+        X = self._X
+        np.subtract(self._upper_bound, q, out=X[0, 0])  # distance to the upper bound
+        np.subtract(q, self._lower_bound, out=X[0, 1])
         if acc_out is None:
-            np.multiply(D, position.gain / dt, out=out)
-        elif not np.count_nonzero(np.less(D, 0.0, out=self._outside)):  # inside the range: braking bound
-            np.multiply(D, position._two_a, out=out)
-            out += self._pos_adt2
-            np.sqrt(out, out=out)
-            out -= self._pos_adt
-        else:  # outside: the general formula
-            self._ctx.dt = dt
-            out[:] = position.stacked(self._ctx)
-        out = self._brake_out
-        if out is None:
+            np.multiply(X[0], self.position.gain / dt, out=self._pos_out)
             return 1.0
-        if moving:
-            relative = self._relative
-            np.subtract(self._v_free, self._v_ff, out=relative)
-        else:
-            relative = self._v_free
-        speed, ratio = self._speed, self._ratio
-        np.abs(relative, out=speed)
-        # bound / speed = 2 a dt / (sqrt(a² dt² + 2 a dt speed) + a dt), as in TargetBraking
-        np.multiply(speed, self._brake_two_a_dt, out=ratio)
-        ratio += self._brake_adt2
-        np.sqrt(ratio, out=ratio)
-        ratio += self._brake_adt
-        np.divide(self._brake_two_adt, ratio, out=ratio)
+        np.add(v_prev, self._adt_vec, out=acc_out[0])  # v_prev ± a dt
+        np.subtract(self._adt_vec, v_prev, out=acc_out[1])
+        brake_out = self._brake_out
+        if brake_out is not None:
+            if moving:
+                relative = self._relative
+                np.subtract(self._v_free, self._v_ff, out=relative)
+            else:
+                relative = self._v_free
+            np.abs(relative, out=X[1])  # the speed toward the target, in both rows
+        outside = np.count_nonzero(np.less(X[0], 0.0, out=self._outside))
+        if outside:  # the general formula below; keep the square root real
+            np.maximum(X[0], 0.0, out=X[0])
+        T, S = self._T, self._S
+        np.multiply(self._K, X, out=T)  # 2aD and 2a dt speed
+        np.add(T, self._adt2, out=S)
+        np.sqrt(S, out=S)
+        S += self._adt
+        np.divide(T, S, out=self._braking_out)
+        if outside:
+            self._ctx.dt = dt
+            self._pos_out[:] = self.position.stacked(self._ctx)
+        if brake_out is None:
+            return 1.0
+        ratio = self._ratio  # bound / speed, as in TargetBraking
+        np.divide(self._brake_two_adt, S[1, 0], out=ratio)
         kappa = min(ratio.tolist())
-        np.multiply(ratio, speed, out=out[0])
-        out[1] = out[0]
         away = self._away  # moving away from the target: no bound on that side
         np.less(relative, 0.0, out=away[0])
         np.greater(relative, 0.0, out=away[1])
-        np.copyto(out, _INF, where=away)
+        np.copyto(brake_out, _INF, where=away)
         if moving:
-            signed = self._ff_signed
-            np.multiply(_SIGN, self._v_ff, out=signed)
-            out += signed
+            v_ff = self._v_ff
+            brake_out[0] += v_ff
+            brake_out[1] -= v_ff
         return 1.0 if kappa >= 1.0 else kappa * (1.0 - 1e-12)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import struct
 from typing import Any
 
 import numpy as np
@@ -9,7 +11,7 @@ import pinocchio as pin
 
 from taplan.errors import InvalidInputError
 
-__all__ = ["as_transform", "quaternion_to_matrix"]
+__all__ = ["as_transform", "quaternion_to_matrix", "check_matrix"]
 
 _EXPECTED = "a 4x4 homogeneous transform, a (position (3,), quaternion xyzw (4,)) pair, or a (7,) [x y z qx qy qz qw]"
 
@@ -55,6 +57,48 @@ def as_transform(target: Any, name: str = "target") -> np.ndarray:
     if np.abs(array[3] - (0.0, 0.0, 0.0, 1.0)).max() > 1e-9:
         raise InvalidInputError(name, f"last row {array[3].tolist()}", "[0, 0, 0, 1]")
     return array.copy()
+
+
+_ROTATION = struct.Struct("3d8x3d8x3d")  # the rotation block of a C-ordered float64 4x4, row by row
+_TRANSLATION = struct.Struct("24xd24xd24xd")
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0]).tobytes()
+_ORTHONORMAL_TOL = 1e-6  # as in as_transform
+
+
+def check_matrix(T: np.ndarray, known: bytes, frame: str) -> bytes:
+    """Validate a float64 (4, 4) array target on the hot path and return its rotation block's bytes.
+
+    ``known`` is what an earlier call returned: when the rotation block has the same bytes it was validated
+    already and only the translation is checked (the usual case when a stream moves a target). Otherwise the
+    block is checked with scalar arithmetic (rows orthonormal to 1e-6, determinant > 0, last row [0, 0, 0, 1]);
+    a failing target gets :func:`as_transform`'s error message, naming the argument ``targets[frame]``.
+
+    Raises:
+        InvalidInputError: NaN/inf, a rotation block that is not a rotation, or a wrong last row.
+    """
+    raw = T.tobytes()
+    key = raw[0:24] + raw[32:56] + raw[64:88]
+    if key != known or raw[96:] != _LAST_ROW:
+        a, b, c, d, e, f, g, h, i = _ROTATION.unpack_from(raw)
+        tol = _ORTHONORMAL_TOL
+        rotation = (
+            abs(a * a + b * b + c * c - 1.0) <= tol
+            and abs(d * d + e * e + f * f - 1.0) <= tol
+            and abs(g * g + h * h + i * i - 1.0) <= tol
+            and abs(a * d + b * e + c * f) <= tol
+            and abs(a * g + b * h + c * i) <= tol
+            and abs(d * g + e * h + f * i) <= tol
+            and a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0.0
+        )
+        if not rotation or raw[96:] != _LAST_ROW:
+            name = f"targets[{frame!r}]"
+            as_transform(T, name)  # raises with the specific reason
+            if not rotation:  # within as_transform's tolerance but not this one's: be strict
+                raise InvalidInputError(name, "4x4 whose rotation block is not orthonormal", "a proper rotation")
+    x, y, z = _TRANSLATION.unpack_from(raw)
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        raise InvalidInputError(f"targets[{frame!r}]", T, "finite values (no NaN or inf)")
+    return key
 
 
 def _finite(value: Any, name: str, shape: tuple[int, ...] | None) -> np.ndarray:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -218,9 +217,7 @@ class DifferentialIK:
             if task is None:
                 raise UnknownNameError("task frame", frame, self.frames)
             if type(target) is np.ndarray and target.shape == (4, 4) and target.dtype == np.float64:
-                if not math.isfinite(target.sum()):  # NaN or inf anywhere (or values near the float limit)
-                    raise InvalidInputError(f"targets[{frame!r}]", target, "finite values (no NaN or inf)")
-                task._set(target)
+                task._set_matrix(target, frame)
             else:
                 task._set(as_transform(target, f"targets[{frame!r}]"))
 

@@ -87,6 +87,7 @@ class Problem:
     slack_quadratic: float = SLACK_QUADRATIC
     minimiser: np.ndarray | None = None
     minimiser_exact: bool = False
+    _inside: np.ndarray | None = field(default=None, repr=False, compare=False)  # scratch of minimiser_is_feasible
 
     @property
     def nv(self) -> int:
@@ -137,7 +138,12 @@ class Problem:
         x = self.minimiser
         if not self.minimiser_exact or x is None:
             return False
-        if not ((x <= self.upper).all() and (x >= self.lower).all()):
+        inside = self._inside
+        if inside is None or inside.shape[1] != x.shape[0]:
+            inside = self._inside = np.empty((2, x.shape[0]), dtype=bool)
+        np.less_equal(x, self.upper, out=inside[0])  # NaN fails both tests
+        np.greater_equal(x, self.lower, out=inside[1])
+        if np.count_nonzero(inside) != inside.size:
             return False
         return self.n_rows == 0 or bool((self.G @ x <= self.h).all())
 

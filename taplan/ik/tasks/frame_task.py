@@ -9,7 +9,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan.ik._kinematics import LOCAL_WORLD_ALIGNED, Kinematics
-from taplan.ik._targets import as_transform
+from taplan.ik._targets import as_transform, check_matrix
 from taplan.ik.tasks.task import Task, check_cost, check_gain
 
 __all__ = ["FrameTask"]
@@ -70,10 +70,17 @@ class FrameTask(Task):
         self._M = np.eye(3)
         self._JlogT = np.eye(3)
         self._views: tuple[np.ndarray, ...] | None = None
+        self._checked = b""  # rotation block of the last target validated by _set_matrix
 
     def set_target(self, target: Any) -> None:
         """Target pose ``T_root_frame``: 4x4, ``(position, quaternion_xyzw)`` or (7,) (validated)."""
         self._set(as_transform(target, f"target[{self.name}]" if self.name else "target"))
+
+    def _set_matrix(self, T: np.ndarray, frame: str) -> None:
+        """Set a float64 (4, 4) array target given as ``targets[frame]``, validated by
+        :func:`~taplan.ik._targets.check_matrix` (hot path)."""
+        self._checked = check_matrix(T, self._checked, frame)
+        self._set(T)
 
     def _set(self, T: np.ndarray) -> None:
         """Set a 4x4 target that is already validated (hot path; copied into the task's buffer)."""
