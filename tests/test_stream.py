@@ -7,7 +7,7 @@ import pytest
 
 import taplan
 from taplan.stream import JointStreamer, StreamStatus, braking_distance, max_safe_velocity
-from taplan.stream.sweep import random_scenario, run_scenario, stream_violations
+from taplan.stream.sweep import StreamRecord, random_scenario, run_scenario, stream_violations
 
 DT = 1.0 / 77.0  # [s]
 POS_TOL = 1e-7  # [rad]
@@ -25,8 +25,6 @@ def streamer(limits, teleavatar) -> JointStreamer:
 
 
 def _violations(states, limits, initial):
-    from taplan.stream.sweep import StreamRecord
-
     record = StreamRecord.from_states(states)
     return stream_violations(record, limits, DT, initial)
 
@@ -164,7 +162,7 @@ def test_fast_and_checked_admission_agree(limits, teleavatar, rng):
         assert np.all(stop <= room + 1e-12)
 
 
-@pytest.mark.parametrize("synchronization", ["time", "phase", "none"])
+@pytest.mark.parametrize("synchronization", ["time", "phase", "none", "auto"])
 def test_seeded_sweep_no_violations(limits, synchronization):
     rng = np.random.default_rng(7)
     streamer = JointStreamer(limits, DT, synchronization=synchronization, timeout=0.5)
@@ -178,6 +176,44 @@ def test_seeded_sweep_no_violations(limits, synchronization):
             totals[key] = totals.get(key, 0) + value
     assert totals == dict.fromkeys(totals, 0)
     assert rejected > 0  # malformed targets were exercised
+
+
+def test_auto_synchronization_is_time_unless_retargeting_every_period(limits, teleavatar, rng):
+    """ "auto": identical to "time" for targets that are followed for more than one period; with a target every
+    period, unsynchronised first periods, and at the first period without a target a time-synchronised re-plan
+    from the emitted state (what a "time" streamer would compute from that state)."""
+    span = limits.upper - limits.lower
+    auto = JointStreamer(limits, DT, synchronization="auto", timeout=None, initial=teleavatar.home)
+    timed = JointStreamer(limits, DT, synchronization="time", timeout=None, initial=teleavatar.home)
+    q = teleavatar.home.copy()
+    for k in range(120):  # policy-rate targets (every 3 periods), some with velocities: bit-identical streams
+        if k % 3 == 0:
+            q = np.clip(q + rng.normal(0.0, 0.02, q.size) * span, limits.lower, limits.upper)
+            v = 0.05 * limits.velocity * rng.uniform(-1.0, 1.0, q.size) if k % 2 else None
+            auto.set_target(q, v)
+            timed.set_target(q, v)
+        a, b = auto.step(), timed.step()
+        for x, y in zip(a[1:5], b[1:5], strict=True):
+            np.testing.assert_array_equal(x, y)
+        assert a.new_calculation == b.new_calculation
+    states = []
+    for _ in range(40):  # a target every period, then a pause
+        q = np.clip(q + rng.normal(0.0, 0.005, q.size) * span, limits.lower, limits.upper)
+        auto.set_target(q)
+        states.append(auto.step())
+    before, replanned = states[-1], auto.step()
+    assert replanned.new_calculation  # the re-plan, time-synchronised
+    reference = JointStreamer(limits, DT, synchronization="time", timeout=None)
+    reference.reset(before.position, before.velocity, before.acceleration)
+    reference.set_target(q)
+    expected = reference.step()
+    for x, y in zip(replanned[1:5], expected[1:5], strict=True):
+        np.testing.assert_allclose(x, y, atol=1e-9)
+    following = [auto.step() for _ in range(200)]
+    assert following[-1].reached
+    record = StreamRecord.from_states([a, *states, replanned, *following])  # from the last policy-phase state
+    counts = stream_violations(record, limits, DT)
+    assert counts == dict.fromkeys(counts, 0)
 
 
 @pytest.mark.slow

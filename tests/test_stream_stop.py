@@ -92,7 +92,7 @@ def test_unsynchronised_moving_target_stops_inside_bounds(teleavatar, caplog):
     assert not [r for r in caplog.records if "leaves the position bounds" in r.getMessage()]
 
 
-@pytest.mark.parametrize("synchronization", ["time", "none"])
+@pytest.mark.parametrize("synchronization", ["time", "none", "auto"])
 def test_retarget_every_period_near_bounds(teleavatar, synchronization):
     """A new target every period (the vouched-for first period only) aimed at and beyond the bounds, with target
     velocities, then silence: every command inside the limits and continuous."""

@@ -62,7 +62,13 @@ class JointStreamer:
             ``"clamp"`` (default) admits the nearest admissible target and flags ``StreamState.target_adjusted``;
             ``"raise"`` raises :class:`~taplan.StreamError` and keeps the previous target.
         synchronization: ruckig synchronisation of the joints: ``"time"`` (all joints arrive together, default),
-            ``"phase"`` (straight line in joint space when possible) or ``"none"`` (each joint time-optimal).
+            ``"phase"`` (straight line in joint space when possible), ``"none"`` (each joint time-optimal) or
+            ``"auto"``: ``"none"`` for a trajectory computed while a new target arrives every period (only its first
+            period is ever emitted: the next target replaces it), ``"time"`` otherwise. When such a stream pauses
+            for a period, the trajectory to its last target is re-planned time-synchronised from the emitted state,
+            so every trajectory followed for more than one period is time-synchronised, as with ``"time"``, while a
+            target every period costs ruckig about half as much (about 8 against 19 [us] for 14 joints). All
+            limits, the position bounds and continuity hold in every mode.
         initial: Optional initial position [rad], shape (n,): calls ``reset(initial)``.
 
     Example:
@@ -79,7 +85,7 @@ class JointStreamer:
         *,
         timeout: float | None = 1.0,
         on_out_of_bounds: Literal["clamp", "raise"] = "clamp",
-        synchronization: Literal["time", "phase", "none"] = "time",
+        synchronization: Literal["time", "phase", "none", "auto"] = "time",
         initial: npt.ArrayLike | None = None,
     ) -> None:
         if not isinstance(limits, JointLimits):
@@ -90,11 +96,14 @@ class JointStreamer:
             timeout = as_positive(timeout, "timeout")
         if on_out_of_bounds not in ("clamp", "raise"):
             raise InvalidInputError("on_out_of_bounds", on_out_of_bounds, "'clamp' or 'raise'")
-        if synchronization not in ("time", "phase", "none"):
-            raise InvalidInputError("synchronization", synchronization, "'time', 'phase' or 'none'")
+        if synchronization not in ("time", "phase", "none", "auto"):
+            raise InvalidInputError("synchronization", synchronization, "'time', 'phase', 'none' or 'auto'")
         self.timeout = timeout
         self.on_out_of_bounds = on_out_of_bounds
         self.synchronization = synchronization
+        self._auto = synchronization == "auto"
+        self._sync = "time" if self._auto else synchronization  # what trajectories followed further use
+        self._provisional = False  # "auto": the last trajectory was planned unsynchronised for one period
         self.n = limits.size
         self._lower = np.array(limits.lower)
         self._upper = np.array(limits.upper)
@@ -224,12 +233,13 @@ class JointStreamer:
             adapter.set_brake()
             self._mode = _BRAKE
         else:
-            adapter.set_position_target(q.tolist(), self._zero_list, self.synchronization)
+            adapter.set_position_target(q.tolist(), self._zero_list, self._sync)
             self._mode = _POSITION
         self._time = 0.0
         self._pending = None
         self._unchecked = False
         self._retargeting = False
+        self._provisional = False
         self._target_position = q.tolist()
         self._target_velocity = self._zero_list
         self._target_moving = False
@@ -352,19 +362,25 @@ class JointStreamer:
         adapter = self._adapter
         fault = None
         pending = self._pending
+        provisional, self._provisional = self._provisional, False
         if pending is not None:
             self._pending = None
             if pending == _POSITION:
                 self._mode = _POSITION
-                adapter.set_position_target(self._target_position, self._target_velocity, self.synchronization)
+                if self._auto and self._retargeting:  # a target every period: only one period will be emitted
+                    self._provisional = True
+                    adapter.set_position_target(self._target_position, self._target_velocity, "none")
+                else:
+                    adapter.set_position_target(self._target_position, self._target_velocity, self._sync)
             else:
                 self._mode = _BRAKE
                 adapter.set_brake()
-        elif (
-            self._mode == _POSITION and self._watchdog.expired(self._time) and self._state.status is StreamStatus.MOVING
-        ):
-            self._mode = _BRAKE
-            adapter.set_brake()
+        elif self._mode == _POSITION:
+            if self._watchdog.expired(self._time) and self._state.status is StreamStatus.MOVING:
+                self._mode = _BRAKE
+                adapter.set_brake()
+            elif provisional:  # "auto": no new target this period: follow the last one time-synchronised
+                adapter.set_position_target(self._target_position, self._target_velocity, self._sync)
         try:
             result = adapter.update()
         except StreamError as exc:
@@ -448,6 +464,7 @@ class JointStreamer:
         velocity is dropped, since a moving target can require swinging out beyond the bounds), then braking.
         """
         adapter = self._adapter
+        self._provisional = False  # the fallback is followed as it is
         if self._mode == _POSITION:
             adapter.set_position_target(self._target_position, self._zero_list, "none")
             result = adapter.update()

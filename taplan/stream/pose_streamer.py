@@ -120,7 +120,7 @@ class PoseStreamer:
         tolerance: tuple[float, float] = (1e-3, 1e-2),
         stall_time: float = 0.25,
         stall_motion: float = 0.02,
-        synchronization: Literal["time", "phase", "none"] = "none",
+        synchronization: Literal["time", "phase", "none", "auto"] = "none",
         ik: DifferentialIK | None = None,
         initial: npt.ArrayLike | None = None,
         **ik_options: Any,

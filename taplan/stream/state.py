@@ -37,7 +37,8 @@ class StreamState(NamedTuple):
         acceleration: Commanded acceleration [rad]/[s]². Shape (n,).
         jerk: Jerk over the last period [rad]/[s]³. Shape (n,).
         status: See :class:`StreamStatus`.
-        new_calculation: True when a new trajectory was computed this period (new target, stop, fallback).
+        new_calculation: True when a new trajectory was computed this period (new target, stop, fallback, or the
+            time-synchronised re-plan of ``synchronization="auto"``).
         target_adjusted: True when the current target was changed to keep the motion inside the limits (position
             clamped into the bounds, target velocity reduced or dropped); the requested values are never silently
             lost: they stay in ``JointStreamer.requested_target``.
