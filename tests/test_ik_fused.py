@@ -153,3 +153,25 @@ def test_hot_path_validates_every_matrix_target(robot):
     fortran = np.asfortranarray(good)  # memory order does not matter
     ik.step({"left_ee": fortran})
     assert np.array_equal(ik.tasks["left_ee"].target, good)
+
+
+def test_vectorised_capsule_distances_match_the_scalar_reference(robot, rng):
+    from taplan.ik import Kinematics
+    from taplan.ik.limits import capsule_pair_distance
+    from taplan.ik.limits.collision_limit import _PairArrays
+
+    pairs = robot.capsule_pairs("left", "right")
+    arrays = _PairArrays(robot.model, pairs)
+    kin = Kinematics(robot.model)
+    lim = robot.limits
+    checked = close = 0
+    for _ in range(300):
+        kin.update(rng.uniform(lim.lower, lim.upper))
+        d, grads = arrays.evaluate(kin)
+        for i, (a, b) in enumerate(pairs):
+            d_ref, g_ref, _, _ = capsule_pair_distance(kin, a, b)
+            assert abs(d[i] - d_ref) <= 1e-12  # [m]
+            assert np.abs(grads[i] - g_ref).max() <= 1e-10  # [m/rad]
+            checked += 1
+            close += d_ref < 0.1
+    assert checked == 300 * len(pairs) and close > 0  # near pairs (the ones that matter) were among them

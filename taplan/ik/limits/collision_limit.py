@@ -117,6 +117,7 @@ class CollisionLimit(RowLimit):
         self._speed = np.zeros(m)
         self._horizon = np.zeros(m)
         self._distances_eval = np.full(m, np.inf)
+        self._pairs = _PairArrays(model, self.pairs)
 
     def reset(self) -> None:
         """Forget the last exact evaluation (e.g. after a jump in configuration)."""
@@ -135,7 +136,7 @@ class CollisionLimit(RowLimit):
         s = self._scratch
         np.subtract(q, self._q_eval, out=s)
         np.abs(s, out=s)
-        travel = self.reach * float(s.sum())
+        travel = self.reach * sum(s.tolist())
         if self.acceleration is None:
             skip = travel < self._clearance  # nan-safe: nan fails the test and forces an evaluation
         else:  # also leave room to brake (see the class docstring)
@@ -147,31 +148,27 @@ class CollisionLimit(RowLimit):
             horizon += 2.0 * ctx.dt
             horizon *= speed
             np.subtract(self._distances_eval, horizon, out=horizon)
-            skip = float(horizon.min()) - travel > self.influence  # nan-safe as above
+            skip = min(horizon.tolist()) - travel > self.influence  # nan-safe as above
         if skip:
             self._min_distance = self._clearance + self.influence - travel
             return 0
         dt = ctx.dt
-        k = 0
-        for i, (first, second) in enumerate(self.pairs):
-            d, grad, _, _ = capsule_pair_distance(ctx.kin, first, second)
-            self.distances[i] = d
-            np.abs(grad, out=self._abs_grads[i])
-            gap = d - self.margin - self.buffer
-            rate = self.gain * gap / dt
-            active = d < self.influence
-            if self.acceleration is not None:
-                alpha = 0.5 * float(np.abs(grad) @ self.acceleration)
-                self._inv_two_alpha[i] = 1.0 / max(2.0 * alpha, 1e-9)
-                approach = max(0.0, -float(grad @ ctx.v_prev))
-                active = active or gap < 1.5 * approach * approach / (2.0 * alpha) + 2.0 * approach * dt
-                if gap > 0.0:
-                    rate = min(rate, float(np.sqrt(2.0 * alpha * gap)))
-            if not active:
-                continue
-            np.negative(grad, out=G[k])
-            h[k] = rate
-            k += 1
+        d, grads = self._pairs.evaluate(ctx.kin)
+        self.distances[:] = d
+        np.abs(grads, out=self._abs_grads)
+        gap = d - (self.margin + self.buffer)
+        rate = gap * (self.gain / dt)
+        active = d < self.influence
+        if self.acceleration is not None:
+            alpha = 0.5 * (self._abs_grads @ self.acceleration)
+            np.divide(1.0, np.maximum(2.0 * alpha, 1e-9), out=self._inv_two_alpha)
+            approach = np.maximum(-(grads @ ctx.v_prev), 0.0)
+            active |= gap < 1.5 * approach * approach * self._inv_two_alpha + 2.0 * approach * dt
+            np.minimum(rate, np.sqrt(2.0 * alpha * np.maximum(gap, 0.0)), out=rate, where=gap > 0.0)
+        k = int(np.count_nonzero(active))
+        if k:
+            np.negative(grads[active], out=G[:k])
+            h[:k] = rate[active]
         self._q_eval[:] = q
         if self.acceleration is not None:
             np.multiply(self._inv_two_alpha, 1.5, out=self._braking_factor)
@@ -180,6 +177,87 @@ class CollisionLimit(RowLimit):
         self._clearance = d_min - self.influence
         self._min_distance = d_min
         return k
+
+
+class _PairArrays:
+    """All capsule pairs' distances and gradients at once (the same closed form as
+    :func:`~taplan.collision.segment_closest_points` and :func:`capsule_pair_distance`, vectorised over pairs).
+
+    Gradients use the world-frame joint Jacobians of ``computeJointJacobians``: a point ``x`` carried by joint
+    ``k``'s chain moves at ``J_v,j + J_ω,j × x`` per unit of joint ``j``, so ``∂(n·x)/∂q_j = n·J_v,j + J_ω,j·(x × n)``.
+    """
+
+    def __init__(self, model: pin.Model, pairs: Sequence[tuple[Capsule, Capsule]]) -> None:
+        capsules = list({id(c): c for pair in pairs for c in pair}.values())
+        index = {id(c): i for i, c in enumerate(capsules)}
+        self.joints = [c.joint for c in capsules]
+        self.local = np.stack([np.stack([c.start, c.end], axis=1) for c in capsules])  # (C, 3, 2)
+        self.first = np.array([index[id(a)] for a, _ in pairs], dtype=int)
+        self.second = np.array([index[id(b)] for _, b in pairs], dtype=int)
+        self.radii = np.array([a.radius + b.radius for a, b in pairs])
+        support = np.zeros((len(capsules), model.nv))
+        for i, capsule in enumerate(capsules):
+            for joint in model.supports[capsule.joint]:
+                if joint > 0:
+                    support[i, model.joints[joint].idx_v] = 1.0
+        self.support_first, self.support_second = support[self.first], support[self.second]
+        self.pairs = list(pairs)
+        self._R = np.zeros((len(capsules), 3, 3))
+        self._t = np.zeros((len(capsules), 3, 1))
+
+    def evaluate(self, kin: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+        """Distances [m] (P,) (negative when overlapping) and their gradients ``dd/dq`` (P, nv) at ``kin``'s state."""
+        data = kin.data
+        oMi = data.oMi
+        R, t = self._R, self._t
+        for i, joint in enumerate(self.joints):
+            placement = oMi[joint]
+            R[i] = placement.rotation
+            t[i, :, 0] = placement.translation
+        world = R @ self.local + t  # (C, 3, 2): segment end points
+        p0, q0 = world[self.first, :, 0], world[self.second, :, 0]
+        d1 = world[self.first, :, 1] - p0
+        d2 = world[self.second, :, 1] - q0
+        r = p0 - q0
+        a = np.einsum("pk,pk->p", d1, d1)
+        e = np.einsum("pk,pk->p", d2, d2)
+        b = np.einsum("pk,pk->p", d1, d2)
+        c = np.einsum("pk,pk->p", d1, r)
+        f = np.einsum("pk,pk->p", d2, r)
+        eps = 1e-12
+        if not (a.min() > eps and e.min() > eps):  # a degenerate segment: the scalar reference handles it
+            return self._scalar(kin)
+        denom = a * e - b * b
+        s = np.zeros_like(a)
+        np.divide(b * f - c * e, denom, out=s, where=denom > eps)
+        np.clip(s, 0.0, 1.0, out=s)
+        t_ = (b * s + f) / e
+        below, above = t_ < 0.0, t_ > 1.0
+        s = np.where(below, np.clip(-c / a, 0.0, 1.0), np.where(above, np.clip((b - c) / a, 0.0, 1.0), s))
+        np.clip(t_, 0.0, 1.0, out=t_)
+        pa = p0 + s[:, None] * d1
+        pb = q0 + t_[:, None] * d2
+        delta = pa - pb
+        norm = np.sqrt(np.einsum("pk,pk->p", delta, delta))
+        if not norm.min() > 1e-9:  # intersecting axes: the scalar reference picks the direction
+            return self._scalar(kin)
+        n = delta / norm[:, None]
+        J = data.J
+        along = n @ J[:3]  # n·J_v, (P, nv)
+        points = np.concatenate([pa, pb])
+        normals = np.concatenate([n, n])
+        moment = np.empty_like(points)  # x × n for both closest points
+        moment[:, 0] = points[:, 1] * normals[:, 2] - points[:, 2] * normals[:, 1]
+        moment[:, 1] = points[:, 2] * normals[:, 0] - points[:, 0] * normals[:, 2]
+        moment[:, 2] = points[:, 0] * normals[:, 1] - points[:, 1] * normals[:, 0]
+        turn = moment @ J[3:]  # (2P, nv)
+        m = len(self.pairs)
+        grads = self.support_first * (along + turn[:m]) - self.support_second * (along + turn[m:])
+        return norm - self.radii, grads
+
+    def _scalar(self, kin: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+        out = [capsule_pair_distance(kin, a, b) for a, b in self.pairs]
+        return np.array([o[0] for o in out]), np.stack([o[1] for o in out])
 
 
 def _reach_bound(model: pin.Model, pairs: Sequence[tuple[Capsule, Capsule]]) -> float:
