@@ -66,7 +66,16 @@ def test_bad_pose_rejected_and_timeout_stops(teleavatar):
     T = teleavatar.frame_pose(teleavatar.home, "left_ee").copy()
     T[:3, 3] += [0.0, 0.0, 0.08]
     streamer.set_target({"left_ee": T})
-    for bad in ({"left_ee": np.full((4, 4), np.nan)}, {"right_ee": T}, {"left_ee": np.eye(3)}, {}):
+    moved_nan, moved_inf = T.copy(), T.copy()  # same rotation as the accepted target, bad translation
+    moved_nan[0, 3], moved_inf[2, 3] = np.nan, np.inf
+    for bad in (
+        {"left_ee": np.full((4, 4), np.nan)},
+        {"left_ee": moved_nan},
+        {"left_ee": moved_inf},
+        {"right_ee": T},
+        {"left_ee": np.eye(3)},
+        {},
+    ):
         with pytest.raises(taplan.StreamError):
             streamer.set_target(bad)
     states = [streamer.step() for _ in range(150)]

@@ -195,7 +195,7 @@ class PoseStreamer:
         for frame, pose in targets.items():
             if frame not in frame_ids:
                 raise StreamError(f"{UnknownNameError('task frame', frame, self.frames)}; the target was rejected")
-            flat = _fast_transform(pose)
+            flat = _fast_transform(pose, self._targets.get(frame))
             if flat is None:
                 try:
                     T = as_transform(pose, f"targets[{frame!r}]")
@@ -318,16 +318,28 @@ def _supporting_joints(model: Any, frame_id: int) -> np.ndarray:
     return np.array([model.joints[j].idx_q for j in model.supports[joint] if j > 0], dtype=int)
 
 
-def _fast_transform(pose: Any) -> list[float] | None:
+def _fast_transform(pose: Any, previous: list[float] | None = None) -> list[float] | None:
     """The top 3 rows (12 floats) of a float 4x4 proper rigid transform; None when it needs the full check.
 
     One ``tolist`` and plain float arithmetic: finiteness (the sum of finite floats is finite), the last row, an
-    orthonormal rotation (row products within 1e-6, as :func:`~taplan.ik._targets.as_transform`) and det > 0.
+    orthonormal rotation (row products within 1e-6, as :func:`~taplan.ik._targets.as_transform`) and det > 0. A
+    rotation equal to the one of ``previous`` (an accepted target's top rows) was checked already: only the
+    translation's finiteness is left (a target that moves without turning).
     """
     if type(pose) is not np.ndarray or pose.shape != (4, 4) or pose.dtype != np.float64:
         return None
     r0, r1, r2, last = pose.tolist()
-    if not math.isfinite(sum(r0) + sum(r1) + sum(r2)) or last != [0.0, 0.0, 0.0, 1.0]:
+    if last != [0.0, 0.0, 0.0, 1.0]:
+        return None
+    if (
+        previous is not None
+        and r0[0] == previous[0]  # (cheap first test: a turning target fails here)
+        and r0[:3] == previous[0:3]
+        and r1[:3] == previous[4:7]
+        and r2[:3] == previous[8:11]
+    ):
+        return r0 + r1 + r2 if math.isfinite(r0[3] + r1[3] + r2[3]) else None
+    if not math.isfinite(sum(r0) + sum(r1) + sum(r2)):
         return None
     a, b, c = r0[0], r0[1], r0[2]
     d, e, f = r1[0], r1[1], r1[2]
