@@ -11,7 +11,7 @@ import pinocchio as pin
 
 from taplan.errors import InvalidInputError
 
-__all__ = ["as_transform", "quaternion_to_matrix", "check_matrix"]
+__all__ = ["as_transform", "quaternion_to_matrix", "check_matrix", "pose_keys"]
 
 _EXPECTED = "a 4x4 homogeneous transform, a (position (3,), quaternion xyzw (4,)) pair, or a (7,) [x y z qx qy qz qw]"
 
@@ -65,8 +65,8 @@ _LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0]).tobytes()
 _ORTHONORMAL_TOL = 1e-6  # as in as_transform
 
 
-def check_matrix(T: np.ndarray, known: bytes, frame: str) -> bytes:
-    """Validate a float64 (4, 4) array target on the hot path and return its rotation block's bytes.
+def check_matrix(T: np.ndarray, known: bytes, frame: str) -> tuple[bytes, tuple[float, float, float]]:
+    """Validate a float64 (4, 4) array target on the hot path; return its rotation block's bytes and its translation.
 
     ``known`` is what an earlier call returned: when the rotation block has the same bytes it was validated
     already and only the translation is checked (the usual case when a stream moves a target). Otherwise the
@@ -98,7 +98,13 @@ def check_matrix(T: np.ndarray, known: bytes, frame: str) -> bytes:
     x, y, z = _TRANSLATION.unpack_from(raw)
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         raise InvalidInputError(f"targets[{frame!r}]", T, "finite values (no NaN or inf)")
-    return key
+    return key, (x, y, z)
+
+
+def pose_keys(T: np.ndarray) -> tuple[bytes, tuple[float, float, float]]:
+    """The keys :func:`check_matrix` returns, for a 4x4 target that is already validated."""
+    raw = np.ascontiguousarray(T).tobytes()
+    return raw[0:24] + raw[32:56] + raw[64:88], _TRANSLATION.unpack_from(raw)
 
 
 def _finite(value: Any, name: str, shape: tuple[int, ...] | None) -> np.ndarray:

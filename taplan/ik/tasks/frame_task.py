@@ -9,7 +9,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan.ik._kinematics import LOCAL_WORLD_ALIGNED, Kinematics
-from taplan.ik._targets import as_transform, check_matrix
+from taplan.ik._targets import as_transform, check_matrix, pose_keys
 from taplan.ik.tasks.task import Task, check_cost, check_gain
 
 __all__ = ["FrameTask"]
@@ -60,10 +60,13 @@ class FrameTask(Task):
         self._p_target = self._target[:3, 3]
         # target motion (feed-forward): the target at the last ``feedforward`` call, an explicit twist for the step
         self.estimate_velocity = False
-        self._last = np.eye(4)
+        self._last = np.eye(4)  # the target at the last velocity estimate
         self._p_last = self._last[:3, 3]
-        self._last_bytes = self._last.tobytes()
-        self._moved = False
+        self._rot_key = self._last_rot = b""  # the rotation's bytes and the translation of the target and of _last
+        self._pos_key: tuple[float, ...] = ()
+        self._last_pos: tuple[float, ...] = ()
+        self._rot_moved = self._pos_moved = False
+        self._ff_views: tuple[np.ndarray, ...] | None = None
         self._twist: np.ndarray | None = None
         self._twist_buffer = np.zeros(6)
         self._b_zero = False
@@ -79,14 +82,20 @@ class FrameTask(Task):
     def _set_matrix(self, T: np.ndarray, frame: str) -> None:
         """Set a float64 (4, 4) array target given as ``targets[frame]``, validated by
         :func:`~taplan.ik._targets.check_matrix` (hot path)."""
-        self._checked = check_matrix(T, self._checked, frame)
-        self._set(T)
+        keys = check_matrix(T, self._checked, frame)
+        self._checked = keys[0]
+        self._set(T, keys)
 
-    def _set(self, T: np.ndarray) -> None:
-        """Set a 4x4 target that is already validated (hot path; copied into the task's buffer)."""
-        self._target[:] = T
-        self.target = self._target
-        self._moved = True
+    def _set(self, T: np.ndarray, keys: tuple[bytes, tuple[float, float, float]] | None = None) -> None:
+        """Set a 4x4 target that is already validated (hot path; copied into the task's buffer); ``keys`` are its
+        :func:`~taplan.ik._targets.pose_keys` if known."""
+        target = self._target
+        target[:] = T
+        self.target = target
+        # which parts moved since the last velocity estimate (the rotation's bytes, the translation's values)
+        self._rot_key, self._pos_key = pose_keys(target) if keys is None else keys
+        self._rot_moved = self._rot_key != self._last_rot
+        self._pos_moved = self._pos_key != self._last_pos
 
     def set_target_from_configuration(self, kin: Kinematics) -> None:
         """Target = the frame's current pose (hold it); forgets the target's motion."""
@@ -96,8 +105,8 @@ class FrameTask(Task):
     def reset_motion(self) -> None:
         """Forget the target's motion: the current target is the reference of the next velocity estimate."""
         self._last[:] = self._target
-        self._last_bytes = self._target.tobytes()
-        self._moved = False
+        self._last_rot, self._last_pos = self._rot_key, self._pos_key
+        self._rot_moved = self._pos_moved = False
         self._twist = None
 
     def set_target_velocity(self, twist: np.ndarray) -> None:
@@ -117,35 +126,37 @@ class FrameTask(Task):
         """
         twist = self._twist
         if twist is not None:
-            self._twist = None
-            self._last[:] = self._target
-            self._last_bytes = self._target.tobytes()
-            self._moved = False
+            self.reset_motion()
             b[:3] = twist[:3]
             self._angular(twist[3:], b)
             self._b_zero = False
             return 2
-        if self._moved and self.estimate_velocity:
-            self._moved = False
-            # compare bytes (cheaper than array operations; -0.0 vs 0.0 only costs a zero estimate)
-            now, last = self._target.tobytes(), self._last_bytes
-            if now != last:
-                inv_dt = 1.0 / dt
-                b3 = b[:3]
-                np.subtract(self._p_target, self._p_last, out=b3)
-                b3 *= inv_dt
-                if now[0:24] != last[0:24] or now[32:56] != last[32:56] or now[64:88] != last[64:88]:
-                    omega = pin.log3(self._target[:3, :3] @ self._last[:3, :3].T)
-                    omega *= inv_dt
-                    self._angular(omega, b)
-                else:
-                    b[3:] = 0.0
-                    if not self._unit:
-                        b3 *= self._weights[:3]
-                self._last[:] = self._target
-                self._last_bytes = now
-                self._b_zero = False
-                return 1
+        if self.estimate_velocity and (self._pos_moved or self._rot_moved):
+            views = self._ff_views
+            if views is None or views[0] is not b:
+                views = self._ff_views = (b, b[:3], b[3:])
+            _, b_pos, b_rot = views
+            inv_dt = 1.0 / dt
+            if self._pos_moved:
+                np.subtract(self._p_target, self._p_last, out=b_pos)
+                b_pos *= inv_dt
+                self._p_last[:] = self._p_target
+            else:
+                b_pos.fill(0.0)
+            if self._rot_moved:
+                R_last = self._last[:3, :3]
+                omega = pin.log3(self._target[:3, :3] @ R_last.T)
+                omega *= inv_dt
+                self._angular(omega, b)
+                R_last[:] = self._target[:3, :3]
+            else:
+                b_rot.fill(0.0)
+                if not self._unit:
+                    b_pos *= self._weights[:3]
+            self._last_rot, self._last_pos = self._rot_key, self._pos_key
+            self._rot_moved = self._pos_moved = False
+            self._b_zero = False
+            return 1
         if not self._b_zero:
             b.fill(0.0)
             self._b_zero = True
