@@ -32,6 +32,7 @@ _SYNCHRONIZATION = {
     "phase": ruckig.Synchronization.Phase,
     "none": ruckig.Synchronization.No,
 }
+_BRAKE = "brake"  # (the velocity interface, not a synchronization name)
 WORKING = int(ruckig.Result.Working)
 FINISHED = int(ruckig.Result.Finished)
 
@@ -53,7 +54,7 @@ class RuckigAdapter:
         self._amax = limits.acceleration.tolist()
         self._jmax = limits.jerk.tolist()
         self.inp.target_acceleration = self._zeros  # never changes: every target is at zero acceleration
-        self._interface: tuple[object, object] | None = None  # (control interface, synchronization) last assigned
+        self._interface: str | None = None  # last assigned: a position target's synchronization, or _BRAKE
         self._range = range(n)
 
     def set_state(self, position: list[float], velocity: list[float], acceleration: list[float]) -> None:
@@ -63,24 +64,23 @@ class RuckigAdapter:
         self.inp.current_acceleration = acceleration
         self.otg.reset()
 
-    def _set_interface(self, interface: object, synchronization: object) -> None:
-        # each assignment crosses into C++ and copies: skip it when nothing changes (the hot path of retargeting)
-        key = (interface, synchronization)
-        if self._interface != key:
-            self.inp.control_interface = interface
-            self.inp.synchronization = synchronization
-            self._interface = key
-
     def set_position_target(self, position: list[float], velocity: list[float], synchronization: str) -> None:
         """Position interface: reach ``position`` with ``velocity`` and zero acceleration."""
-        self._set_interface(ruckig.ControlInterface.Position, _SYNCHRONIZATION[synchronization])
         inp = self.inp
+        # each assignment crosses into C++ and copies: skip the interface when nothing changes (retargeting)
+        if self._interface != synchronization:
+            inp.control_interface = ruckig.ControlInterface.Position
+            inp.synchronization = _SYNCHRONIZATION[synchronization]
+            self._interface = synchronization
         inp.target_position = position
         inp.target_velocity = velocity
 
     def set_brake(self) -> None:
         """Velocity interface to zero velocity and acceleration: the shortest jerk-limited stop."""
-        self._set_interface(ruckig.ControlInterface.Velocity, ruckig.Synchronization.No)
+        if self._interface != _BRAKE:
+            self.inp.control_interface = ruckig.ControlInterface.Velocity
+            self.inp.synchronization = ruckig.Synchronization.No
+            self._interface = _BRAKE
         self.inp.target_velocity = self._zeros
 
     def update(self) -> int:

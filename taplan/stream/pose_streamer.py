@@ -210,12 +210,19 @@ class PoseStreamer:
             flats.append((frame, flat))
         state = self.joints.state  # raises before reset
         stored = self._targets
+        far = self._restart_distance
         for frame, flat in flats:
             previous = stored.get(frame)
             if previous != flat:
                 self._holding = False  # any change resumes tracking
-                if previous is None or max(map(abs, map(sub, flat, previous))) > self._restart_distance:
-                    self._history[frame].clear()  # a target that moved restarts its progress window
+                if (  # a target that moved (any entry of its top rows) restarts its progress window
+                    previous is None
+                    or abs(flat[3] - previous[3]) > far  # (the translation first: a moving target stops here)
+                    or abs(flat[7] - previous[7]) > far
+                    or abs(flat[11] - previous[11]) > far
+                    or max(map(abs, map(sub, flat, previous))) > far
+                ):
+                    self._history[frame].clear()
                 stored[frame] = flat
         if not self._active:  # resume from where the joint stream is, with its velocity (acceleration limit state)
             self.ik.reset(state.position, state.velocity)
