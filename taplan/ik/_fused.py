@@ -89,7 +89,9 @@ class FusedBuilder:
         for i, task in enumerate(frames):
             r = slice(6 * i, 6 * i + 6)
             A, b = self._A[r], self._b[r]
-            self._frames.append((task, task.frame_id, A, b, self._b_ff[r], A[:3], A[3:], b[:3], b[3:]))
+            target = task._target  # the task's target buffer (fixed): its rotation and translation views
+            views = (A, b, self._b_ff[r], A[:3], A[3:], b[:3], b[3:], target[:3, :3], target[:3, 3])
+            self._frames.append((task, task.frame_id, *views))
         self._H = np.zeros((n, n))
         self._c = np.zeros(n)
         self._c_ff = np.zeros(n)
@@ -97,8 +99,8 @@ class FusedBuilder:
         self._rhs0, self._rhs1 = self._rhs[:, 0], self._rhs[:, 1]
         self._tmp = np.zeros(n)
         self._v_prev = np.zeros(n)
-        self._v_free = np.zeros(n)
-        self._v_ff = np.zeros(n)
+        self._x = np.zeros((n, 2), order="F")  # [v_free, v_ff] as solved together (contiguous columns)
+        self._v_free, self._v_ff = self._x[:, 0], self._x[:, 1]
         self._minimiser = np.zeros(n)
         self._stack = np.zeros((len(self.box_limits), 2, n))
         self._box = np.zeros((2, n))
@@ -114,6 +116,12 @@ class FusedBuilder:
         self._T = np.zeros((k, 2, n))
         self._S = np.zeros((k, 2, n))
         self._upper_bound, self._lower_bound = position.upper, position.lower
+        self._distance = self._X[0]
+        self._distance_flat = self._distance.reshape(-1)
+        self._X_upper, self._X_lower = self._X[0, 0], self._X[0, 1]
+        self._X_speed = self._X[k - 1]
+        self._S_brake = self._S[k - 1, 0]
+        self._away_upper, self._away_lower = self._away[0], self._away[1]
         self._lower = np.zeros(n)
         self._upper = self._box[0]
         layer = {id(lim): self._stack[k] for k, lim in enumerate(self.box_limits)}
@@ -122,6 +130,10 @@ class FusedBuilder:
         self._brake_out = None if braking is None else layer[id(braking)]
         index = self.box_limits.index(position)  # position and braking layers are adjacent (priorities 20, 30)
         self._braking_out = self._stack[index : index + k]
+        if acceleration is not None:
+            self._acc_upper, self._acc_lower = self._acc_out[0], self._acc_out[1]
+        if braking is not None:
+            self._brake_upper, self._brake_lower = self._brake_out[0], self._brake_out[1]
         layer[id(velocity)][:] = velocity.velocity  # constant: [v_max, v_max]
         self._dt = -1.0
         self._posture_weights: np.ndarray | None = None
@@ -191,18 +203,17 @@ class FusedBuilder:
         if self.posture._weights is not self._posture_weights:
             self._new_posture_weights()
         moving = False
-        for task, fid, A6, b6, bff6, A_pos, A_rot, b_pos, b_rot in self._frames:
+        for task, fid, A6, b6, bff6, A_pos, A_rot, b_pos, b_rot, R_target, p_target in self._frames:
             if task._unit and task.gain == 1.0:
                 if task.target is None:
                     task._require_target()
                 placement = _frame_placement(model, data, fid)
-                target = task._target
-                Mt = np.dot(target[:3, :3], placement.rotation.T)  # R* Rᵀ
+                Mt = np.dot(R_target, placement.rotation.T)  # R* Rᵀ
                 J = _frame_jacobian(model, data, fid, LOCAL_WORLD_ALIGNED)
                 JlogT = _Jlog3(Mt)
                 np.dot(JlogT, J[3:], out=A_rot)
                 A_pos[:] = J[:3]
-                np.subtract(target[:3, 3], placement.translation, out=b_pos)
+                np.subtract(p_target, placement.translation, out=b_pos)
                 b_rot[:] = _log3(Mt)
                 task._M = Mt.T  # for the feed-forward of a rotating target
                 task._JlogT = JlogT
@@ -225,20 +236,19 @@ class FusedBuilder:
         tmp *= self._posture_gain
         rhs0 += tmp
         rhs0 *= 1.0 / dt
-        c = self._c
-        np.negative(rhs0, out=c)
+        c = self._c  # written at the end, with the objective scale; here only for the least-squares fallback
         v_free, v_ff = self._v_free, self._v_ff
         problem = self.problem
         if moving:
             np.dot(AT, self._b_ff, out=self._rhs1)  # -c_ff
             _, x, info = _dposv(H.T, self._rhs)  # H is symmetric: H.T is the Fortran-ordered view LAPACK wants
             if info == 0:
-                v_free[:] = x[:, 0]
-                v_ff[:] = x[:, 1]
+                self._x[:] = x
                 problem.minimiser_exact = True
             else:
                 np.negative(self._rhs1, out=self._c_ff)
                 _free_velocity(H, self._c_ff, v_ff)
+                np.negative(rhs0, out=c)
                 problem.minimiser_exact = _free_velocity(H, c, v_free)
         else:
             _, x, info = _dposv(H.T, rhs0)
@@ -246,6 +256,7 @@ class FusedBuilder:
                 v_free[:] = x
                 problem.minimiser_exact = True
             else:
+                np.negative(rhs0, out=c)
                 problem.minimiser_exact = _free_velocity(H, c, v_free)
         v_prev_buffer = self._v_prev
         if v_prev is None:
@@ -264,19 +275,21 @@ class FusedBuilder:
                 intersect_stacked(box, stack[k], scratch)
         np.negative(box[1], out=self._lower)
         minimiser = self._minimiser
-        if scale != 1.0 and moving:  # scale the part relative to the target's motion: v_ff + κ (v_free - v_ff)
-            c_ff = self._c_ff
-            np.negative(self._rhs1, out=c_ff)
-            c -= c_ff
-            c *= scale
-            c += c_ff
+        # c = -rhs0 scaled by κ; with moving targets only the part relative to their motion is scaled:
+        # c = c_ff + κ (c - c_ff) with c_ff = -rhs1, and the minimiser becomes v_ff + κ (v_free - v_ff)
+        if scale != 1.0 and moving:
+            rhs1 = self._rhs1
+            np.subtract(rhs0, rhs1, out=c)
+            c *= -scale
+            c -= rhs1
             np.subtract(v_free, v_ff, out=minimiser)
             minimiser *= scale
             minimiser += v_ff
         elif scale != 1.0:
-            c *= scale
+            np.multiply(rhs0, -scale, out=c)
             np.multiply(v_free, scale, out=minimiser)
         else:
+            np.negative(rhs0, out=c)
             minimiser[:] = v_free
         problem.dt = dt
         k = 0
@@ -300,13 +313,13 @@ class FusedBuilder:
         """
         acc_out = self._acc_out
         X = self._X
-        np.subtract(self._upper_bound, q, out=X[0, 0])  # distance to the upper bound
-        np.subtract(q, self._lower_bound, out=X[0, 1])
+        np.subtract(self._upper_bound, q, out=self._X_upper)  # distances to the bounds
+        np.subtract(q, self._lower_bound, out=self._X_lower)
         if acc_out is None:
-            np.multiply(X[0], self.position.gain / dt, out=self._pos_out)
+            np.multiply(self._distance, self.position.gain / dt, out=self._pos_out)
             return 1.0
-        np.add(v_prev, self._adt_vec, out=acc_out[0])  # v_prev ± a dt
-        np.subtract(self._adt_vec, v_prev, out=acc_out[1])
+        np.add(v_prev, self._adt_vec, out=self._acc_upper)  # v_prev ± a dt
+        np.subtract(self._adt_vec, v_prev, out=self._acc_lower)
         brake_out = self._brake_out
         if brake_out is not None:
             if moving:
@@ -314,10 +327,10 @@ class FusedBuilder:
                 np.subtract(self._v_free, self._v_ff, out=relative)
             else:
                 relative = self._v_free
-            np.abs(relative, out=X[1])  # the speed toward the target, in both rows
-        outside = np.count_nonzero(np.less(X[0], 0.0, out=self._outside))
+            np.abs(relative, out=self._X_speed)  # the speed toward the target, in both rows
+        outside = min(self._distance_flat.tolist()) < 0.0
         if outside:  # the general formula below; keep the square root real
-            np.maximum(X[0], 0.0, out=X[0])
+            np.maximum(self._distance, 0.0, out=self._distance)
         T, S = self._T, self._S
         np.multiply(self._K, X, out=T)  # 2aD and 2a dt speed
         np.add(T, self._adt2, out=S)
@@ -330,14 +343,14 @@ class FusedBuilder:
         if brake_out is None:
             return 1.0
         ratio = self._ratio  # bound / speed, as in TargetBraking
-        np.divide(self._brake_two_adt, S[1, 0], out=ratio)
+        np.divide(self._brake_two_adt, self._S_brake, out=ratio)
         kappa = min(ratio.tolist())
         away = self._away  # moving away from the target: no bound on that side
-        np.less(relative, 0.0, out=away[0])
-        np.greater(relative, 0.0, out=away[1])
+        np.less(relative, 0.0, out=self._away_upper)
+        np.greater(relative, 0.0, out=self._away_lower)
         np.copyto(brake_out, _INF, where=away)
         if moving:
             v_ff = self._v_ff
-            brake_out[0] += v_ff
-            brake_out[1] -= v_ff
+            self._brake_upper += v_ff
+            self._brake_lower -= v_ff
         return 1.0 if kappa >= 1.0 else kappa * (1.0 - 1e-12)
