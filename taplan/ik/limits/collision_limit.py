@@ -204,6 +204,7 @@ class _PairArrays:
         self.pairs = list(pairs)
         self._R = np.zeros((len(capsules), 3, 3))
         self._t = np.zeros((len(capsules), 3, 1))
+        self._V = np.zeros((len(pairs), 3, 3))
 
     def evaluate(self, kin: Kinematics) -> tuple[np.ndarray, np.ndarray]:
         """Distances [m] (P,) (negative when overlapping) and their gradients ``dd/dq`` (P, nv) at ``kin``'s state."""
@@ -216,14 +217,14 @@ class _PairArrays:
             t[i, :, 0] = placement.translation
         world = R @ self.local + t  # (C, 3, 2): segment end points
         p0, q0 = world[self.first, :, 0], world[self.second, :, 0]
-        d1 = world[self.first, :, 1] - p0
-        d2 = world[self.second, :, 1] - q0
-        r = p0 - q0
-        a = np.einsum("pk,pk->p", d1, d1)
-        e = np.einsum("pk,pk->p", d2, d2)
-        b = np.einsum("pk,pk->p", d1, d2)
-        c = np.einsum("pk,pk->p", d1, r)
-        f = np.einsum("pk,pk->p", d2, r)
+        V = self._V  # per pair the rows d1, d2, r, whose Gram matrix holds every dot product needed
+        np.subtract(world[self.first, :, 1], p0, out=V[:, 0])
+        np.subtract(world[self.second, :, 1], q0, out=V[:, 1])
+        np.subtract(p0, q0, out=V[:, 2])
+        gram = V @ V.transpose(0, 2, 1)
+        d1, d2 = V[:, 0], V[:, 1]
+        a, b, c = gram[:, 0, 0], gram[:, 0, 1], gram[:, 0, 2]
+        e, f = gram[:, 1, 1], gram[:, 1, 2]
         eps = 1e-12
         if not (a.min() > eps and e.min() > eps):  # a degenerate segment: the scalar reference handles it
             return self._scalar(kin)
@@ -238,7 +239,7 @@ class _PairArrays:
         pa = p0 + s[:, None] * d1
         pb = q0 + t_[:, None] * d2
         delta = pa - pb
-        norm = np.sqrt(np.einsum("pk,pk->p", delta, delta))
+        norm = np.sqrt((delta * delta).sum(axis=1))
         if not norm.min() > 1e-9:  # intersecting axes: the scalar reference picks the direction
             return self._scalar(kin)
         n = delta / norm[:, None]
