@@ -52,6 +52,18 @@ def test_stop_excursion_covers_ruckig_braking(rng):
         assert down == pytest.approx(low, abs=1e-9) and up == pytest.approx(high, abs=1e-9)
 
 
+def test_stop_excursion_at_the_mirror_edge(rng):
+    """Regression: v = -a^2 / (2 j) (the velocity that an acceleration ramped down at the jerk limit cancels) once
+    raised a math domain error from rounding, in a streamer's step."""
+    for _ in range(5000):
+        amax, jmax = rng.uniform(1.0, 40.0), rng.uniform(1.0, 400.0)
+        a = rng.uniform(0.0, amax) * rng.choice([-1.0, 1.0])
+        v = -a * abs(a) / (2.0 * jmax)
+        down, up = stop_excursion(v, a, amax, jmax)
+        low, high = _ruckig_brake_range(v, a, 1e3, amax, jmax)
+        assert down <= low + EXCURSION_TOL and up >= high - EXCURSION_TOL
+
+
 def test_stop_screen_is_conservative(rng):
     """_stop_fits' cheap screen bounds the exact excursion: s (|a| / j + 2 amax / j + s / amax), s = |v| + a^2/2j."""
     for v, a, _vmax, amax, jmax in _random_states(rng, 20000):

@@ -107,7 +107,7 @@ def stop_excursion(v: float, a: float, amax: float, jmax: float) -> tuple[float,
         return -high, -low
     peak2 = 0.5 * a * a + jmax * v
     if peak2 <= amax * amax:
-        peak = math.sqrt(peak2)
+        peak = math.sqrt(max(peak2, 0.0))  # >= 0 but for rounding at v = -a^2 / (2 j) (the mirror test's edge)
         t2 = 0.0
     else:
         peak = amax
