@@ -61,11 +61,12 @@ class JointStreamer:
             ``POSITION_TOLERANCE``) or a target speed above the limit or above what the bounds allow braking from:
             ``"clamp"`` (default) admits the nearest admissible target and flags ``StreamState.target_adjusted``;
             ``"raise"`` raises :class:`~taplan.StreamError` and keeps the previous target.
-        synchronization: ruckig synchronisation of the joints: ``"time"`` (all joints arrive together, default),
+        synchronization: ruckig synchronisation of the joints: ``"time"`` (all joints arrive together),
             ``"phase"`` (straight line in joint space when possible), ``"none"`` (each joint time-optimal) or
-            ``"auto"``: ``"none"`` for a trajectory computed while a new target arrives every period (only its first
-            period is ever emitted: the next target replaces it), ``"time"`` otherwise. When such a stream pauses
-            for a period, the trajectory to its last target is re-planned time-synchronised from the emitted state,
+            ``"auto"`` (default): ``"none"`` for a trajectory computed while a new target arrives every period (only
+            its first period is ever emitted: the next target replaces it), ``"time"`` otherwise. When such a stream
+            pauses for a period, the trajectory to its last target is re-planned time-synchronised from the emitted
+            state,
             so every trajectory followed for more than one period is time-synchronised, as with ``"time"``, while a
             target every period costs ruckig about half as much (about 8 against 19 [us] for 14 joints). All
             limits, the position bounds and continuity hold in every mode.
@@ -85,7 +86,7 @@ class JointStreamer:
         *,
         timeout: float | None = 1.0,
         on_out_of_bounds: Literal["clamp", "raise"] = "clamp",
-        synchronization: Literal["time", "phase", "none", "auto"] = "time",
+        synchronization: Literal["time", "phase", "none", "auto"] = "auto",
         initial: npt.ArrayLike | None = None,
     ) -> None:
         if not isinstance(limits, JointLimits):
