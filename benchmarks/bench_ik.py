@@ -29,6 +29,7 @@ RADIUS = 0.05  # [m]
 FREQUENCY = 0.5  # [Hz] of the circles
 POSTURE_COST = 1e-2
 DAMPING = 1e-3
+ROUNDS = 5  # interleaved chunks per configuration in the timing benchmark
 
 
 def _targets(robot: taplan.Robot, q0: np.ndarray, t: float) -> dict[str, np.ndarray]:
@@ -153,24 +154,30 @@ def bench_tracking(robot, repeats: int, warmup: int) -> list[dict[str, Any]]:
                 "mink": lambda dt=dt, solver=solver: MinkIK(robot, limits, dt, solver),
                 "pink": lambda dt=dt, solver=solver: PinkIK(robot, limits, dt, solver),
             }
-            for name, make in makers.items():
-                ik = make()
-                n = warmup + repeats
-                targets = [_targets(robot, robot.home, k * dt) for k in range(n)]
-                samples = np.empty(repeats)
-                errors = []
-                for k in range(n):
-                    t0 = time.perf_counter_ns()
-                    out = ik.step(targets[k])
-                    t1 = time.perf_counter_ns()
-                    if k >= warmup:
-                        samples[k - warmup] = (t1 - t0) / 1e3
-                        q = out.q if hasattr(out, "q") else out[1]
-                        errors.append(
-                            max(np.linalg.norm(robot.frame_pose(q, f)[:3, 3] - targets[k][f][:3, 3]) for f in FRAMES)
-                        )
-                stats = _harness.summarize(samples)
-                errors_arr = np.asarray(errors)
+            # the IKs take turns in chunks of steps (each continues its own trajectory), so that a noisy spell on
+            # the shared machine hits every IK alike instead of whichever ran during it
+            n = warmup + repeats
+            targets = [_targets(robot, robot.home, k * dt) for k in range(n)]
+            iks = {name: make() for name, make in makers.items()}
+            samples = {name: [] for name in iks}
+            errors = {name: [] for name in iks}
+            for chunk in np.array_split(np.arange(n), ROUNDS):
+                for name, ik in iks.items():
+                    for k in chunk.tolist():
+                        t0 = time.perf_counter_ns()
+                        out = ik.step(targets[k])
+                        t1 = time.perf_counter_ns()
+                        if k >= warmup:
+                            samples[name].append((t1 - t0) / 1e3)
+                            q = out.q if hasattr(out, "q") else out[1]
+                            errors[name].append(
+                                max(
+                                    np.linalg.norm(robot.frame_pose(q, f)[:3, 3] - targets[k][f][:3, 3]) for f in FRAMES
+                                )
+                            )
+            for name in iks:
+                stats = _harness.summarize(np.asarray(samples[name]))
+                errors_arr = np.asarray(errors[name])
                 rows.append(
                     {
                         "dt": dt,
@@ -426,7 +433,9 @@ def _markdown(tracking, step, converge, sweep) -> str:
         f"Both end effectors track {RADIUS * 100:.0f} cm circles at {FREQUENCY} Hz; posture cost {POSTURE_COST}, "
         f"damping {DAMPING}; position + velocity limits (planning limits). taplan also has collision avoidance on; "
         "'acc on' adds acceleration limits with braking (toward the targets, relative to their motion estimated by "
-        "finite differences). Step time includes setting targets, building, solving and integrating. Tracking error: "
+        "finite differences). Step time includes setting targets, building, solving and integrating; the four IKs "
+        "of a (dt, solver) group take turns in 5 chunks of steps (same process), so machine noise hits them alike. "
+        "Tracking error: "
         "hand position after the step vs the target given to it, worst hand, over the timed steps (after the warm-up)."
     )
     lines.append("")
