@@ -29,7 +29,7 @@ from scipy.linalg.lapack import dposv as _dposv
 from taplan.ik._kinematics import LOCAL_WORLD_ALIGNED, Kinematics
 from taplan.ik.limits import AccelerationLimit, CollisionLimit, PositionLimit, TargetBraking, VelocityLimit
 from taplan.ik.limits.limit import StepContext, intersect_stacked
-from taplan.ik.problem import Problem, _free_velocity
+from taplan.ik.problem import Problem, _free_velocity, check_damping
 from taplan.ik.tasks import FrameTask, PostureTask
 
 __all__ = ["FusedBuilder"]
@@ -107,7 +107,6 @@ class FusedBuilder:
         self._scratch = np.zeros((2, n))
         self._width = np.zeros(n)
         self._neg = np.zeros(n, dtype=bool)
-        self._outside = np.zeros((2, n), dtype=bool)
         self._relative = np.zeros(n)
         self._ratio = np.zeros(n)
         self._away = np.zeros((2, n), dtype=bool)
@@ -162,11 +161,7 @@ class FusedBuilder:
 
     @damping.setter
     def damping(self, value: float) -> None:
-        from taplan.errors import InvalidInputError
-
-        if not (np.isfinite(value) and value >= 0.0):
-            raise InvalidInputError("damping", value, "a number >= 0")
-        self._damping = float(value)
+        self._damping = check_damping(value)
         self._posture_weights = None  # rebuild the diagonal
 
     def _new_dt(self, dt: float) -> None:

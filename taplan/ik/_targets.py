@@ -78,7 +78,8 @@ def check_matrix(T: np.ndarray, known: bytes, frame: str) -> tuple[bytes, tuple[
     """
     raw = T.tobytes()
     key = raw[0:24] + raw[32:56] + raw[64:88]
-    if key != known or raw[96:] != _LAST_ROW:
+    last_row = raw[96:] == _LAST_ROW
+    if key != known or not last_row:
         a, b, c, d, e, f, g, h, i = _ROTATION.unpack_from(raw)
         tol = _ORTHONORMAL_TOL
         rotation = (
@@ -90,7 +91,7 @@ def check_matrix(T: np.ndarray, known: bytes, frame: str) -> tuple[bytes, tuple[
             and abs(d * g + e * h + f * i) <= tol
             and a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0.0
         )
-        if not rotation or raw[96:] != _LAST_ROW:
+        if not (rotation and last_row):
             name = f"targets[{frame!r}]"
             as_transform(T, name)  # raises with the specific reason
             if not rotation:  # within as_transform's tolerance but not this one's: be strict

@@ -224,9 +224,7 @@ class ProblemBuilder:
 
     @damping.setter
     def damping(self, value: float) -> None:
-        if not (np.isfinite(value) and value >= 0.0):
-            raise InvalidInputError("damping", value, "a number >= 0")
-        self._damping = float(value)
+        self._damping = check_damping(value)
         self._damping_matrix = self._damping * np.eye(self.kin.nv)
 
     def build(self, q: np.ndarray, dt: float, v_prev: np.ndarray | None = None) -> Problem:
@@ -298,6 +296,13 @@ class ProblemBuilder:
             problem.G = self._G[:k]
             problem.h = self._h[:k]
         return problem
+
+
+def check_damping(value: float) -> float:
+    """Validate a Levenberg-Marquardt damping (a finite number >= 0)."""
+    if not (np.isfinite(value) and value >= 0.0):
+        raise InvalidInputError("damping", value, "a number >= 0")
+    return float(value)
 
 
 def _free_velocity(H: np.ndarray, c: np.ndarray, out: np.ndarray) -> bool:

@@ -66,10 +66,9 @@ class JointStreamer:
             ``"auto"`` (default): ``"none"`` for a trajectory computed while a new target arrives every period (only
             its first period is ever emitted: the next target replaces it), ``"time"`` otherwise. When such a stream
             pauses for a period, the trajectory to its last target is re-planned time-synchronised from the emitted
-            state,
-            so every trajectory followed for more than one period is time-synchronised, as with ``"time"``, while a
-            target every period costs ruckig about half as much (about 8 against 19 [us] for 14 joints). All
-            limits, the position bounds and continuity hold in every mode.
+            state, so every trajectory followed for more than one period is time-synchronised, as with ``"time"``,
+            while a target every period costs ruckig about half as much (about 8 against 19 [us] for 14 joints).
+            All limits, the position bounds and continuity hold in every mode.
         initial: Optional initial position [rad], shape (n,): calls ``reset(initial)``.
 
     Example:
