@@ -489,3 +489,22 @@ def test_shortcut_equals_the_qp_solution(robot):
         a = fast.step()
         np.testing.assert_allclose(a.velocity, solve_ik(a.problem.copy(), tight), atol=1e-7)  # [rad/s]
     assert fast.qp_solves < 120  # the shortcut was taken
+
+
+@pytest.mark.parametrize("solver", [s for s in available_solvers() if s in ("quadprog", "osqp", "daqp")])
+def test_backends_solve_boxes_pinned_to_one_point(solver):
+    """A relaxed intersection can pin a joint (lower == upper); quadprog used to report "no solution" there."""
+    from taplan.ik.problem import Problem
+    from taplan.ik.solvers import get_solver
+
+    rng = np.random.default_rng(5)
+    n = 14
+    c = rng.normal(size=n)
+    lower, upper = -np.full(n, 0.5), np.full(n, 0.5)
+    pinned = [1, 4, 9]
+    lower[pinned] = upper[pinned] = rng.uniform(-0.3, 0.3, len(pinned))
+    problem = Problem(np.eye(n), c, lower, upper, np.zeros((0, n)), np.zeros(0), DT, np.zeros(n), -c)
+    v = get_solver(solver).solve(problem)
+    # with H = I the optimum is the projection of -c onto the box (independent closed form)
+    tol = 1e-5 if solver == "osqp" else 1e-9  # [rad/s]
+    np.testing.assert_allclose(v, np.clip(-c, lower, upper), atol=tol)

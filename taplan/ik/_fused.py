@@ -16,6 +16,11 @@ the operations:
 
 Parameters are read from the same task and limit objects the generic builder uses (one definition of each limit);
 ``tests/test_ik_fused.py`` checks that both builders produce the same problems and steps.
+
+With ``native=True`` (the default) the whole assembly above, kinematics included, is one compiled CasADi function
+(:mod:`taplan.ik._kernel`, :mod:`taplan.ik._native`) when the model's joints are supported and a C compiler is
+available; Python then only estimates the targets' motion, calls it and adds the collision rows. The numpy code
+below stays the reference and the fallback (the kernel hands it the rare steps it does not cover).
 """
 
 from __future__ import annotations
@@ -26,7 +31,9 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dposv as _dposv
 
+from taplan.ik._kernel import param_layout, step_function
 from taplan.ik._kinematics import LOCAL_WORLD_ALIGNED, Kinematics
+from taplan.ik._native import NativeFunction, compile_function
 from taplan.ik.limits import AccelerationLimit, CollisionLimit, PositionLimit, TargetBraking, VelocityLimit
 from taplan.ik.limits.limit import StepContext, intersect_stacked
 from taplan.ik.problem import Problem, _free_velocity, check_damping
@@ -57,6 +64,7 @@ class FusedBuilder:
         acceleration: Acceleration limit, or None.
         braking: Target braking (requires ``acceleration``), or None.
         collision: Collision rows, or None.
+        native: Compute the problem with a compiled kernel when possible (see the module docstring).
     """
 
     def __init__(
@@ -70,6 +78,7 @@ class FusedBuilder:
         acceleration: AccelerationLimit | None = None,
         braking: TargetBraking | None = None,
         collision: CollisionLimit | None = None,
+        native: bool = True,
     ) -> None:
         n = kin.nv
         self.kin = kin
@@ -92,6 +101,8 @@ class FusedBuilder:
             target = task._target  # the task's target buffer (fixed): its rotation and translation views
             views = (A, b, self._b_ff[r], A[:3], A[3:], b[:3], b[3:], target[:3, :3], target[:3, 3])
             self._frames.append((task, task.frame_id, *views))
+        self._motions = [np.zeros(6) for _ in frames]  # each target's motion [ṗ*, ω*] (FrameTask.motion)
+        self._codes = [0] * len(frames)
         self._H = np.zeros((n, n))
         self._c = np.zeros(n)
         self._c_ff = np.zeros(n)
@@ -153,6 +164,82 @@ class FusedBuilder:
             [(lim.name, layer[id(lim)]) for lim in self.box_limits],
             minimiser=self._minimiser,
         )
+        self.frame_errors = np.zeros(2 * len(frames))  # the kernel's [position [m], orientation [rad]] per frame
+        self._kernel: NativeFunction | None = None
+        self._kernel_state: tuple = (None, None, None)
+        if native:
+            self._kernel = self._attach_kernel()
+        self.native_steps = 0  # steps computed by the kernel (the others by numpy)
+
+    @property
+    def native(self) -> bool:
+        """Whether a compiled kernel computes the problems (else the numpy code of this module)."""
+        return self._kernel is not None
+
+    def _attach_kernel(self) -> NativeFunction | None:
+        frames = [entry[0] for entry in self._frames]
+        if not all(type(task) is FrameTask for task in frames) or type(self.posture) is not PostureTask:
+            return None
+        acceleration, braking = self.acceleration is not None, self.braking is not None
+        collision = self.collision
+        pairs = 0 if collision is None else len(collision.pairs)
+        function = step_function(self.kin.model, [t.frame_id for t in frames], acceleration, braking, pairs)
+        if function is None:
+            return None
+        n = self.kin.nv
+        self._layout = param_layout(n, len(frames), acceleration, braking, pairs)
+        self._params = np.zeros(self._layout["size"].stop)
+        self._step = np.zeros(1 + len(frames))
+        self._flag = np.zeros(1)
+        per_frame = [x for task, m in zip(frames, self._motions, strict=True) for x in (task._target.reshape(-1), m)]
+        inputs = [self.kin.q, self._v_prev, self.posture.target, self._params, self._step, *per_frame]
+        outputs = [
+            self._H.reshape(-1),
+            self._c,
+            self._minimiser,
+            self._x.reshape(-1, order="F"),  # [v_free, v_ff]
+            self._stack.reshape(-1),
+            self._box.reshape(-1),
+            self._lower,
+            self._flag,
+            self.frame_errors,
+        ]
+        self._screen = np.zeros(2)
+        if pairs:
+            inputs += [collision._q_eval, collision._abs_grads.reshape(-1), collision._braking_factor]
+            inputs.append(collision._distances_eval)
+            outputs.append(self._screen)
+        return compile_function(function, inputs, outputs)
+
+    def _write_params(self, dt: float) -> None:
+        """The kernel's parameters for step ``dt`` and the current weights, gains and damping."""
+        frames = [entry[0] for entry in self._frames]
+        self._kernel_state = (dt, self.posture._weights, self._damping, *[t.gain for t in frames])
+        if dt != self._dt:
+            self._new_dt(dt)
+        if self.posture._weights is not self._posture_weights:
+            self._new_posture_weights()
+        put = {
+            "diagonal": np.diag(self._diagonal),
+            "posture_gain": self._posture_gain,
+            "velocity": self.velocity.velocity,
+            "upper": self.position.upper,
+            "lower": self.position.lower,
+            "position_gain": self.position.gain,
+        }
+        if self.collision is not None and self.collision.pairs:
+            put["reach"] = self.collision.reach
+        if self.acceleration is not None:
+            put["acceleration"] = self.acceleration.acceleration
+            put["position_acceleration"] = self.position.acceleration
+        if self.braking is not None:
+            put["braking_acceleration"] = self.braking.acceleration
+        for i, task in enumerate(frames):
+            put[f"weights{i}"] = task._weights
+            put[f"gain{i}"] = task.gain
+        for name, value in put.items():
+            self._params[self._layout[name]] = value
+        self._step[0] = dt
 
     @property
     def damping(self) -> float:
@@ -188,17 +275,56 @@ class FusedBuilder:
 
     def build(self, q: np.ndarray, dt: float, v_prev: np.ndarray | None = None) -> Problem:
         """Update kinematics at ``q`` [rad] and fill the problem for a step of ``dt`` [s] (inputs not validated)."""
+        kernel = self._kernel
+        if kernel is None:
+            return self._build_numpy(q, dt, v_prev, None)
+        kin = self.kin
+        kin.q[:] = q
+        state = self._kernel_state
+        if dt != state[0] or self.posture._weights is not state[1] or self._damping != state[2]:
+            self._write_params(dt)
+        else:
+            for task, gain in zip(self._frames, state[3:], strict=True):
+                if task[0].gain != gain:
+                    self._write_params(dt)
+                    break
+        if v_prev is None:
+            self._v_prev.fill(0.0)
+        else:
+            self._v_prev[:] = v_prev
+        moving = False
+        codes, flags = self._codes, self._step
+        for i, (entry, motion) in enumerate(zip(self._frames, self._motions, strict=True)):
+            task = entry[0]
+            if task.target is None:
+                task._require_target()
+            code = codes[i] = task.motion(dt, motion)
+            if code:
+                moving = True
+            flags[i + 1] = 1.0 if code == 2 else 0.0
+        kernel()
+        if self._flag[0] != 0.0:  # a case the kernel leaves to numpy (see taplan.ik._kernel)
+            return self._build_numpy(q, dt, v_prev, codes)
+        kin.stale = True
+        self.native_steps += 1
+        problem = self.problem
+        problem.minimiser_exact = True
+        return self._rows(problem, dt, moving, self._screen)
+
+    def _build_numpy(self, q: np.ndarray, dt: float, v_prev: np.ndarray | None, codes: list[int] | None) -> Problem:
+        """``build`` with numpy; ``codes`` are the targets' motion codes if :meth:`FrameTask.motion` already ran."""
         kin = self.kin
         model, data = kin.model, kin.data
         kq = kin.q
         kq[:] = q
         _joint_jacobians(model, data, kq)
+        kin.stale = False
         if dt != self._dt:
             self._new_dt(dt)
         if self.posture._weights is not self._posture_weights:
             self._new_posture_weights()
         moving = False
-        for task, fid, A6, b6, bff6, A_pos, A_rot, b_pos, b_rot, R_target, p_target in self._frames:
+        for i, (task, fid, A6, b6, bff6, A_pos, A_rot, b_pos, b_rot, R_target, p_target) in enumerate(self._frames):
             if task._unit and task.gain == 1.0:
                 if task.target is None:
                     task._require_target()
@@ -215,11 +341,15 @@ class FusedBuilder:
             else:
                 _frame_placement(model, data, fid)  # fill and the frame Jacobian read data.oMf
                 task.fill(kin, A6, b6)
-            code = task.feedforward(dt, bff6)
+            motion = self._motions[i]
+            code = task.motion(dt, motion) if codes is None else codes[i]
             if code:
                 moving = True
+                task.map_motion(motion, bff6)
                 if code == 2:  # explicit target velocity: the step aims at where the target will be
                     b6 += bff6 * dt
+            else:
+                bff6.fill(0.0)
         H = self._H
         AT = self._AT
         np.dot(AT, self._A, out=H)
@@ -286,13 +416,23 @@ class FusedBuilder:
         else:
             np.negative(rhs0, out=c)
             minimiser[:] = v_free
+        return self._rows(problem, dt, moving)
+
+    def _rows(self, problem: Problem, dt: float, moving: bool, screen: np.ndarray | None = None) -> Problem:
+        """Set the step's ``dt`` and the collision rows of ``problem`` (``screen``: the kernel's collision
+        screening, else computed here)."""
         problem.dt = dt
         k = 0
         if self.collision is not None:
             ctx = self._ctx
             ctx.dt = dt
             ctx.moving = moving
-            k = self.collision.rows(ctx, self._G, self._h)
+            collision = self.collision
+            if screen is None or not collision.pairs:
+                k = collision.rows(ctx, self._G, self._h)
+            else:
+                travel, closest = screen.tolist()
+                k = collision.screened_rows(ctx, self._G, self._h, travel, closest)
         if problem.h.shape[0] != k:
             problem.G = self._G[:k]
             problem.h = self._h[:k]

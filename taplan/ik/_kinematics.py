@@ -29,12 +29,19 @@ class Kinematics:
         self.data = model.createData() if data is None else data
         self.nv = int(model.nv)
         self.q = np.zeros(self.nv)
+        self.stale = False  # ``q`` changed without ``data`` being updated (a native kernel computed the step)
+
+    def refresh(self) -> None:
+        """Bring ``data`` up to date with ``q`` if a native kernel moved ``q`` without it."""
+        if self.stale:
+            self.update(self.q)
 
     def update(self, q: np.ndarray) -> None:
         """Evaluate kinematics at ``q`` [rad], shape (nv,) (copied)."""
         self.q[:] = q
         pin.computeJointJacobians(self.model, self.data, self.q)
         pin.updateFramePlacements(self.model, self.data)
+        self.stale = False
 
     def frame_jacobian(self, frame_id: int) -> np.ndarray:
         """Jacobian (6, nv) of a frame: linear velocity of its origin and angular velocity, in root axes."""

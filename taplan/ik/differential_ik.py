@@ -7,6 +7,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+import pinocchio as pin
 
 from taplan._validation import as_positive, as_vector
 from taplan.errors import InvalidInputError, UnknownNameError
@@ -88,6 +89,9 @@ class DifferentialIK:
         extra_limits: More limits.
         fused: Build the default configuration's QP with the fused builder (:mod:`taplan.ik._fused`); False, or any
             extra task or limit, uses the generic :class:`~taplan.ik.problem.ProblemBuilder` (same problem, slower).
+        native: With the fused builder, compute each problem with a kernel compiled from CasADi-generated C (once
+            per machine, cached; :mod:`taplan.ik._native`) when a C compiler is available and the joints are
+            revolute or prismatic; else, or with False, numpy. Same problems either way (``tests/test_ik_native.py``).
     """
 
     def __init__(
@@ -111,6 +115,7 @@ class DifferentialIK:
         extra_tasks: Sequence[Task] = (),
         extra_limits: Sequence[BoxLimit | RowLimit] = (),
         fused: bool = True,
+        native: bool = True,
     ) -> None:
         self.robot = robot
         self.dt = as_positive(dt, "dt")
@@ -161,6 +166,7 @@ class DifferentialIK:
                 acceleration,
                 braking,
                 self.collision,
+                native=native,
             )
         else:
             self.builder = ProblemBuilder(self.kin, tasks, [*box, *extra_limits], damping)
@@ -287,6 +293,21 @@ class DifferentialIK:
             iterations,
             problem,
         )
+
+    def step_errors(self) -> dict[str, tuple[float, float]]:
+        """Per task frame ``(position error [m], orientation error [rad])`` to its target at the configuration the
+        last step started from (after ``reset``: the reset configuration), read from that step's own kinematics
+        (nothing is recomputed: the native kernel's values, or pinocchio's data)."""
+        if self.kin.stale:  # the native kernel evaluated the step and pinocchio's data were not needed
+            e = self.builder.frame_errors.tolist()
+            return {frame: (e[2 * i], e[2 * i + 1]) for i, frame in enumerate(self.frames)}
+        oMf = self.kin.data.oMf
+        out = {}
+        for frame, task in self.tasks.items():
+            placement = oMf[task.frame_id]
+            e_p = float(np.linalg.norm(placement.translation - task._p_target))
+            out[frame] = (e_p, float(np.linalg.norm(pin.log3(placement.rotation @ task._R_target_T))))
+        return out
 
     def task_errors(self, q: npt.ArrayLike | None = None) -> dict[str, tuple[float, float]]:
         """Per task frame ``(position error [m], orientation error [rad])`` at ``q`` (default: current state)."""

@@ -299,6 +299,15 @@ class QPSolversSolver(QPSolver):
         n, m = problem.nv, problem.n_rows
         lower = np.maximum(problem.lower, -1e9)
         upper = np.minimum(problem.upper, 1e9)
+        # a joint whose box is one point (a relaxed intersection) is an equality: as two opposite bounds it makes
+        # quadprog's active set degenerate ("no solution")
+        fixed = np.flatnonzero(upper <= lower)
+        A = b = None
+        if fixed.size:
+            A = np.zeros((fixed.size, n + m))
+            A[np.arange(fixed.size), fixed] = 1.0
+            b = lower[fixed].copy()
+            lower[fixed], upper[fixed] = -1e9, 1e9
         if m == 0:
             P, q, G, h, lb, ub = problem.H, problem.c, None, None, lower, upper
         else:
@@ -311,7 +320,7 @@ class QPSolversSolver(QPSolver):
             lb = np.concatenate([lower, np.zeros(m)])
             ub = np.concatenate([upper, np.full(m, 1e9)])
         try:
-            x = qpsolvers.solve_qp(P, q, G, h, lb=lb, ub=ub, solver=self.name, **self.options)
+            x = qpsolvers.solve_qp(P, q, G, h, A, b, lb=lb, ub=ub, solver=self.name, **self.options)
         except Exception as exc:  # backends raise their own types
             raise SolverError(f"{self.name} failed: {exc}", problem.copy()) from exc
         if x is None:

@@ -249,29 +249,13 @@ class PoseStreamer:
             joints.set_target(out.q, ik_velocity)
         # errors at the IK step's start configuration (its kinematics are evaluated there; while holding, at the
         # held configuration)
-        oMf = self.ik.kin.data.oMf
-        frame_ids = self._frame_ids
+        errors = self.ik.step_errors()
         tol_p, tol_r = self.tolerance
         position_error: dict[str, float] = {}
         orientation_error: dict[str, float] = {}
         pose_reached = True
-        for frame, t in self._targets.items():  # t: the target's top 3 rows, row-major
-            r0, r1, r2, _ = oMf[frame_ids[frame]].homogeneous.tolist()
-            e_p = math.dist((r0[3], r1[3], r2[3]), (t[3], t[7], t[11]))
-            # trace(R R*^T) = sum of elementwise products = 1 + 2 cos(angle) (acos resolves ~1e-8 [rad] near 0)
-            cosine = 0.5 * (
-                r0[0] * t[0]
-                + r0[1] * t[1]
-                + r0[2] * t[2]
-                + r1[0] * t[4]
-                + r1[1] * t[5]
-                + r1[2] * t[6]
-                + r2[0] * t[8]
-                + r2[1] * t[9]
-                + r2[2] * t[10]
-                - 1.0
-            )
-            e_r = math.acos(min(1.0, max(-1.0, cosine)))
+        for frame in self._targets:
+            e_p, e_r = errors[frame]
             position_error[frame] = e_p
             orientation_error[frame] = e_r
             if e_p > tol_p or e_r > tol_r:

@@ -132,27 +132,41 @@ class CollisionLimit(RowLimit):
     def rows(self, ctx: StepContext, G: np.ndarray, h: np.ndarray) -> int:
         if not self.pairs:
             return 0
+        travel, closest = self.screen(ctx)
+        return self.screened_rows(ctx, G, h, travel, closest)
+
+    def screen(self, ctx: StepContext) -> tuple[float, float]:
+        """``(travel, closest)`` of the screening (see the class docstring): ``reach ‖q − q_eval‖₁`` [m] and, with
+        an acceleration limit, the smallest pair distance at the last evaluation minus its braking horizon [m]
+        (else inf). The native IK kernel computes the same two numbers from the same buffers."""
         q = ctx.kin.q
         s = self._scratch
         np.subtract(q, self._q_eval, out=s)
         np.abs(s, out=s)
         travel = self.reach * sum(s.tolist())
         if self.acceleration is None:
+            return travel, np.inf
+        np.abs(ctx.v_prev, out=s)
+        speed = self._speed
+        np.matmul(self._abs_grads, s, out=speed)  # per pair, a bound of the approach speed [m/s]
+        horizon = self._horizon
+        np.multiply(speed, self._braking_factor, out=horizon)  # 1.5 s / (2 α)
+        horizon += 2.0 * ctx.dt
+        horizon *= speed
+        np.subtract(self._distances_eval, horizon, out=horizon)
+        return travel, min(horizon.tolist())
+
+    def screened_rows(self, ctx: StepContext, G: np.ndarray, h: np.ndarray, travel: float, closest: float) -> int:
+        """:meth:`rows` given the screening's ``(travel, closest)`` (:meth:`screen`)."""
+        if self.acceleration is None:
             skip = travel < self._clearance  # nan-safe: nan fails the test and forces an evaluation
         else:  # also leave room to brake (see the class docstring)
-            np.abs(ctx.v_prev, out=s)
-            speed = self._speed
-            np.matmul(self._abs_grads, s, out=speed)  # per pair, a bound of the approach speed [m/s]
-            horizon = self._horizon
-            np.multiply(speed, self._braking_factor, out=horizon)  # 1.5 s / (2 α)
-            horizon += 2.0 * ctx.dt
-            horizon *= speed
-            np.subtract(self._distances_eval, horizon, out=horizon)
-            skip = min(horizon.tolist()) - travel > self.influence  # nan-safe as above
+            skip = closest - travel > self.influence  # nan-safe as above
         if skip:
             self._min_distance = self._clearance + self.influence - travel
             return 0
         dt = ctx.dt
+        ctx.kin.refresh()
         d, grads = self._pairs.evaluate(ctx.kin)
         self.distances[:] = d
         np.abs(grads, out=self._abs_grads)
@@ -169,7 +183,7 @@ class CollisionLimit(RowLimit):
         if k:
             np.negative(grads[active], out=G[:k])
             h[:k] = rate[active]
-        self._q_eval[:] = q
+        self._q_eval[:] = ctx.kin.q
         if self.acceleration is not None:
             np.multiply(self._inv_two_alpha, 1.5, out=self._braking_factor)
             self._distances_eval[:] = self.distances

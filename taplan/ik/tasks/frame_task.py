@@ -69,7 +69,7 @@ class FrameTask(Task):
         self._ff_views: tuple[np.ndarray, ...] | None = None
         self._twist: np.ndarray | None = None
         self._twist_buffer = np.zeros(6)
-        self._b_zero = False
+        self._zero: np.ndarray | None = None  # the motion buffer last zeroed by ``motion``
         self._M = np.eye(3)
         self._JlogT = np.eye(3)
         self._views: tuple[np.ndarray, ...] | None = None
@@ -119,53 +119,62 @@ class FrameTask(Task):
         """Write the weighted task-space velocity that follows the target's motion, ``W [ṗ*; J_logᵀ M ω*]``, into
         ``b`` (6,) [m/s, rad/s] (after ``fill`` at the same configuration).
 
+        The motion is the one :meth:`motion` reports (its return value is returned); ``b`` is left all zero when 0
+        is returned.
+        """
+        code = self.motion(dt, b)
+        if code:
+            self.map_motion(b, b)
+        return code
+
+    def motion(self, dt: float, out: np.ndarray) -> int:
+        """Write the target's motion ``[ṗ* (3,) [m/s], ω* (3,) [rad/s]]`` (root axes) into ``out`` (6,).
+
         The motion is the explicit twist given with ``set_target_velocity`` (returns 2: also fed forward in the
         objective), else, if ``estimate_velocity``, the finite difference of the target since the previous call over
-        ``dt`` (returns 1: used by target braking only; 0 if the target did not move), else none (returns 0). ``b``
+        ``dt`` (returns 1: used by target braking only; 0 if the target did not move), else none (returns 0). ``out``
         is left all zero when 0 is returned.
         """
         twist = self._twist
         if twist is not None:
             self.reset_motion()
-            b[:3] = twist[:3]
-            self._angular(twist[3:], b)
-            self._b_zero = False
+            out[:] = twist
+            self._zero = None
             return 2
         if self.estimate_velocity and (self._pos_moved or self._rot_moved):
             views = self._ff_views
-            if views is None or views[0] is not b:
-                views = self._ff_views = (b, b[:3], b[3:])
-            _, b_pos, b_rot = views
+            if views is None or views[0] is not out:
+                views = self._ff_views = (out, out[:3], out[3:])
+            _, out_pos, out_rot = views
             inv_dt = 1.0 / dt
             if self._pos_moved:
-                np.subtract(self._p_target, self._p_last, out=b_pos)
-                b_pos *= inv_dt
+                np.subtract(self._p_target, self._p_last, out=out_pos)
+                out_pos *= inv_dt
                 self._p_last[:] = self._p_target
             else:
-                b_pos.fill(0.0)
+                out_pos.fill(0.0)
             if self._rot_moved:
                 R_last = self._last[:3, :3]
-                omega = pin.log3(self._target[:3, :3] @ R_last.T)
-                omega *= inv_dt
-                self._angular(omega, b)
+                np.multiply(pin.log3(self._target[:3, :3] @ R_last.T), inv_dt, out=out_rot)
                 R_last[:] = self._target[:3, :3]
             else:
-                b_rot.fill(0.0)
-                if not self._unit:
-                    b_pos *= self._weights[:3]
+                out_rot.fill(0.0)
             self._last_rot, self._last_pos = self._rot_key, self._pos_key
             self._rot_moved = self._pos_moved = False
-            self._b_zero = False
+            self._zero = None
             return 1
-        if not self._b_zero:
-            b.fill(0.0)
-            self._b_zero = True
+        if self._zero is not out:  # zeroed once per buffer until a motion is written into it
+            out.fill(0.0)
+            self._zero = out
         return 0
 
-    def _angular(self, omega: np.ndarray, b: np.ndarray) -> None:
-        """``b[3:] = J_logᵀ M ω*`` and the weights: the target's rotation ω* moves the error ``M = R R*ᵀ`` by
-        ``-M ω*`` (left), i.e. the rotation vector by ``-J_logᵀ M ω*``; following it needs ``+J_logᵀ M ω*``."""
-        np.matmul(self._JlogT, self._M @ omega, out=b[3:])
+    def map_motion(self, motion: np.ndarray, b: np.ndarray) -> None:
+        """``b = W [ṗ*; J_logᵀ M ω*]`` from ``motion = [ṗ*, ω*]`` (may be ``b`` itself), with ``M = R R*ᵀ`` and
+        ``J_log`` of the last ``fill``: the target's rotation ω* moves the error ``M`` by ``-M ω*`` (left), i.e. the
+        rotation vector by ``-J_logᵀ M ω*``; following it needs ``+J_logᵀ M ω*``."""
+        if b is not motion:
+            b[:3] = motion[:3]
+        np.matmul(self._JlogT, self._M @ motion[3:], out=b[3:])
         if not self._unit:
             b *= self._weights
 
