@@ -29,7 +29,8 @@ __all__ = ["NativeFunction", "compile_function", "native_enabled"]
 
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 _FLAGS = ("-O2", "-shared", "-fPIC")
-_loaded: dict[str, ctypes.CDLL] = {}
+_loaded: dict[str, ctypes.CDLL] = {}  # by source digest
+_by_function: dict[int, tuple[ca.Function, ctypes.CDLL]] = {}  # by function identity: no code generation again
 
 
 def native_enabled() -> bool:
@@ -145,5 +146,12 @@ def compile_function(
     """``function`` compiled and bound to the buffers, or None when native code is disabled or cannot be built."""
     if not native_enabled():
         return None
-    library = _library(function)
-    return None if library is None else NativeFunction(function, library, inputs, outputs)
+    known = _by_function.get(id(function))
+    if known is not None and known[0] is function:
+        library = known[1]
+    else:
+        library = _library(function)
+        if library is None:
+            return None
+        _by_function[id(function)] = (function, library)
+    return NativeFunction(function, library, inputs, outputs)
