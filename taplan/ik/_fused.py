@@ -83,6 +83,7 @@ class FusedBuilder:
         n = kin.nv
         self.kin = kin
         self.tasks = [*frames, posture]
+        self._frame_tasks = list(frames)
         self.posture = posture
         self.damping = damping
         self.velocity, self.position, self.acceleration, self.braking = velocity, position, acceleration, braking
@@ -177,7 +178,7 @@ class FusedBuilder:
         return self._kernel is not None
 
     def _attach_kernel(self) -> NativeFunction | None:
-        frames = [entry[0] for entry in self._frames]
+        frames = self._frame_tasks
         if not all(type(task) is FrameTask for task in frames) or type(self.posture) is not PostureTask:
             return None
         acceleration, braking = self.acceleration is not None, self.braking is not None
@@ -213,7 +214,7 @@ class FusedBuilder:
 
     def _write_params(self, dt: float) -> None:
         """The kernel's parameters for step ``dt`` and the current weights, gains and damping."""
-        frames = [entry[0] for entry in self._frames]
+        frames = self._frame_tasks
         self._kernel_state = (dt, self.posture._weights, self._damping, *[t.gain for t in frames])
         if dt != self._dt:
             self._new_dt(dt)
@@ -284,8 +285,8 @@ class FusedBuilder:
         if dt != state[0] or self.posture._weights is not state[1] or self._damping != state[2]:
             self._write_params(dt)
         else:
-            for task, gain in zip(self._frames, state[3:], strict=True):
-                if task[0].gain != gain:
+            for task, gain in zip(self._frame_tasks, state[3:], strict=True):
+                if task.gain != gain:
                     self._write_params(dt)
                     break
         if v_prev is None:
@@ -294,8 +295,7 @@ class FusedBuilder:
             self._v_prev[:] = v_prev
         moving = False
         codes, flags = self._codes, self._step
-        for i, (entry, motion) in enumerate(zip(self._frames, self._motions, strict=True)):
-            task = entry[0]
+        for i, (task, motion) in enumerate(zip(self._frame_tasks, self._motions, strict=True)):
             if task.target is None:
                 task._require_target()
             code = codes[i] = task.motion(dt, motion)
