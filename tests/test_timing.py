@@ -143,9 +143,17 @@ def test_retime_infeasible_end_velocity_raises(arm_limits: taplan.JointLimits) -
         retime(q, arm_limits, start_velocity=v_big)  # cannot stop within 1e-4 rad
 
 
-def test_jerk_limited_holds_all_limits_and_is_near_optimal(arm_limits: taplan.JointLimits) -> None:
+def _closest_distances(traj, points: np.ndarray) -> np.ndarray:
+    """Max-norm distance [rad] from each point to the trajectory, on 50,001 samples (independent of taplan)."""
+    q = traj(np.linspace(0.0, traj.duration, 50001))
+    return np.array([np.min(np.max(np.abs(q - p), axis=1)) for p in points])
+
+
+@pytest.mark.parametrize("method", ["joint", "path"])
+def test_jerk_limited_holds_all_limits_and_is_near_optimal(arm_limits: taplan.JointLimits, method: str) -> None:
     q = random_walk(arm_limits, 6, 11)
-    result = jerk_limited(q, arm_limits)
+    result = jerk_limited(q, arm_limits, method=method)
+    assert result.method == method
     traj = result.trajectory
     usage = sampled_limit_usage(traj, arm_limits)
     assert usage.within(LIMIT_TOL, jerk=True)
@@ -153,13 +161,74 @@ def test_jerk_limited_holds_all_limits_and_is_near_optimal(arm_limits: taplan.Jo
     np.testing.assert_allclose(traj(0.0, 2), 0.0, atol=ACC_TOL)
     np.testing.assert_allclose(traj(traj.duration, 2), 0.0, atol=ACC_TOL)
     np.testing.assert_allclose(traj(traj.duration, 1), 0.0, atol=VEL_TOL)
+    np.testing.assert_allclose(traj(0.0), q[0], atol=POS_TOL)
+    np.testing.assert_allclose(traj(traj.duration), q[-1], atol=POS_TOL)
     inner = traj.times[1:-1]
     left = traj(inner - 1e-9, 2)
     right = traj(inner + 1e-9, 2)
     assert np.max(np.abs(left - right)) < 1e-5  # continuous acceleration [rad]/[s]^2
     assert result.duration_ratio <= JERK_DURATION_RATIO
-    for row in q:
-        assert np.min(np.max(np.abs(traj(np.linspace(0, traj.duration, 20001)) - row), axis=1)) < 1e-3
+    distances = _closest_distances(traj, q[1:-1])
+    if method == "path":
+        assert np.max(distances) < 1e-3  # passes every waypoint [rad]
+        assert result.deviation == 0.0
+    else:
+        assert np.max(distances) <= result.deviation + 1e-4  # the reported deviation [rad], up to sampling
+        assert result.deviation <= 0.05  # the default max_deviation [rad]
+
+
+def test_jerk_limited_joint_method_duration_is_topp_plus_the_filter_width(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 30, 5)
+    result = jerk_limited(q, arm_limits)
+    width = float(np.max(2 * arm_limits.acceleration / arm_limits.jerk))
+    assert result.width == pytest.approx(width)
+    np.testing.assert_allclose(result.trajectory.duration, result.topp_duration * result.time_scale + width, rtol=1e-9)
+    assert 1.0 <= result.time_scale < 1.01  # only toppra's rounding excess is scaled away
+    assert result.duration_ratio < 1.05
+    usage = limit_usage(result.trajectory, arm_limits)
+    assert usage.within(LIMIT_TOL, jerk=True)
+    assert usage.max_acceleration > 0.95  # still time-optimal where the filter does not act
+
+
+@pytest.mark.parametrize("max_deviation", [0.01, 0.005])
+def test_jerk_limited_max_deviation_slows_the_corners(arm_limits: taplan.JointLimits, max_deviation: float) -> None:
+    q = random_walk(arm_limits, 12, 3)
+    loose = jerk_limited(q, arm_limits)
+    tight = jerk_limited(q, arm_limits, max_deviation=max_deviation)
+    assert loose.deviation > max_deviation  # the corners of this path are cut more by default
+    assert tight.method == "joint"
+    assert np.max(_closest_distances(tight.trajectory, q[1:-1])) <= max_deviation + 1e-4
+    assert tight.trajectory.duration > loose.trajectory.duration
+    assert limit_usage(tight.trajectory, arm_limits).within(LIMIT_TOL, jerk=True)
+
+
+def test_jerk_limited_zero_deviation_passes_every_waypoint(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 5, 8)
+    result = jerk_limited(q, arm_limits, max_deviation=0.0)
+    assert result.method == "path"
+    assert np.max(_closest_distances(result.trajectory, q[1:-1])) < 1e-3
+
+
+def test_jerk_limited_plans_a_thousand_waypoints(arm_limits: taplan.JointLimits) -> None:
+    q = random_walk(arm_limits, 1000, 4)
+    result = jerk_limited(q, arm_limits)
+    assert result.duration_ratio < 1.01
+    assert limit_usage(result.trajectory, arm_limits).within(LIMIT_TOL, jerk=True)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "argument"),
+    [
+        ({"method": "spline"}, "method"),
+        ({"max_deviation": -0.1}, "max_deviation"),
+        ({"max_deviation": float("nan")}, "max_deviation"),
+        ({"points_per_segment": 0}, "points_per_segment"),
+    ],
+)
+def test_jerk_limited_rejects_bad_options(arm_limits: taplan.JointLimits, kwargs: dict, argument: str) -> None:
+    with pytest.raises(InvalidInputError, match=argument) as info:
+        jerk_limited(random_walk(arm_limits, 4, 1), arm_limits, **kwargs)
+    assert info.value.argument == argument
 
 
 def test_synchronise_together_and_independent(teleavatar: taplan.Robot) -> None:

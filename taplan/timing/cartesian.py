@@ -634,7 +634,8 @@ def _time_leg(
     sub = limits.subset(names)
     qm = q[:, moving]
     try:
-        part = jerk_limited(qm, sub).trajectory if method == "jerk" else retime(qm, sub)
+        # the filter of the path timing keeps the IK samples' geometric path (the line bound holds)
+        part = jerk_limited(qm, sub, method="path").trajectory if method == "jerk" else retime(qm, sub)
     except TimingError as exc:
         raise TimingError(f"cartesian leg {leg_index}: {exc}") from exc
     except InvalidInputError as exc:

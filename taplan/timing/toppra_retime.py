@@ -217,7 +217,8 @@ def _failure_reason(K: np.ndarray | None, sd_start: float, sd_end: float, instan
     return f"TOPP-RA failed ({code}): numerical failure in the forward pass"
 
 
-def _excess(traj: Trajectory, velocity: np.ndarray, acceleration: np.ndarray) -> tuple[float, float]:
+def max_velocity_acceleration(traj: Trajectory, velocity: np.ndarray, acceleration: np.ndarray) -> tuple[float, float]:
+    """Exact peaks of ``|q̇| / velocity`` and ``|q̈| / acceleration`` over the whole trajectory."""
     rv = float(np.max(max_abs_derivative(traj, 1).max(axis=0) / velocity))
     ra = float(np.max(max_abs_derivative(traj, 2).max(axis=0) / acceleration))
     return rv, ra
@@ -278,7 +279,7 @@ def retime(
     for _ in range(MAX_REPAIRS + 1):
         profile = time_optimal_profile(path, vel_k, acc_k, sd0, sd1, points_per_segment=points_per_segment)
         traj = profile.to_trajectory(limits.names)
-        rv, ra = _excess(traj, velocity, acceleration)
+        rv, ra = max_velocity_acceleration(traj, velocity, acceleration)
         if rv <= 1.0 and ra <= 1.0:
             return traj
         if rest:
