@@ -37,7 +37,7 @@ from taplan.limits import JointLimits
 from taplan.reference.replay import JointStateSamples, Replay
 from taplan.trajectory import Trajectory
 
-__all__ = ["JointCheck", "Report", "Thresholds", "TimingCheck", "check", "ldlj", "sparc"]
+__all__ = ["JointCheck", "Report", "Thresholds", "TimingCheck", "check", "ldlj", "sparc", "stream_timing"]
 
 _STILL = 1e-9  # [rad]/[s]: a joint slower than this everywhere "does not move"
 
@@ -494,6 +494,18 @@ def check(
         dropped_waypoints=dropped,
         notes=tuple(notes),
     )
+
+
+def stream_timing(times: npt.ArrayLike, rate: float, thresholds: Thresholds | None = None) -> TimingCheck:
+    """Period statistics of a stream's sample times [s] against its nominal ``rate`` [Hz] (jitter, gaps, repeats).
+
+    Raises:
+        InvalidInputError: fewer than 2 times, or times that are not finite and non-decreasing.
+    """
+    t = _times(times)
+    if t.size < 2 or np.any(np.diff(t) < 0):
+        raise InvalidInputError("times", f"{t.size} times", "at least 2 finite, non-decreasing times")
+    return _timing(np.diff(t), 1.0 / as_positive(rate, "rate"), thresholds or Thresholds())
 
 
 def _timing(periods: np.ndarray, expected: float, th: Thresholds) -> TimingCheck:

@@ -1,4 +1,4 @@
-"""The ``taplan`` command line: ``taplan info | demo | plan | check | replay | bench``.
+"""The ``taplan`` command line: ``taplan info | demo | plan | check | replay | run | sim | bench``.
 
 Each subcommand lives in ``taplan/commands/<name>.py`` with ``add_arguments(parser)`` and ``run(args) -> int``; the
 first line of its docstring is its help text. The CLI owns all output.
@@ -16,7 +16,7 @@ import taplan
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = ("info", "demo", "plan", "check", "replay", "bench")
+COMMANDS = ("info", "demo", "plan", "check", "replay", "run", "sim", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

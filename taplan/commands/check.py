@@ -1,6 +1,8 @@
 """Check a trajectory file against the joint limits and for smoothness; exit 1 when it fails.
 
-``taplan check plan.json`` evaluates the plan itself; ``--controller seed|intended|jtc|jtc-none|joint-position|
+``taplan check plan.json`` evaluates the plan itself; ``taplan check run.mcap`` checks a recorded run (a rosbag2 MCAP
+file from ``taplan run --bag`` or ``ros2 bag record``): the commanded joint streams, their timing, the heartbeat
+gaps and the measured positions; ``--controller seed|intended|jtc|jtc-none|joint-position|
 joint-velocity`` checks what that controller would do with it instead. Joints are matched by name to the robot
 (default the bundled TeleAvatar); ``--limits planning`` uses the planner's scaled limits instead of the hardware
 ceilings. Prints the report, writes a PNG of q, q̇, q̈ and jerk, and optionally the report as JSON.
@@ -17,7 +19,9 @@ from taplan.trajectory import Trajectory
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="trajectory file (.csv with a time column, .json, .npz)")
+    parser.add_argument(
+        "file", type=Path, help="trajectory file (.csv with a time column, .json, .npz) or a recorded run (.mcap bag)"
+    )
     add_controller_arguments(parser, "trajectory")
     parser.add_argument("--limits", choices=("hardware", "planning"), default="hardware", help="limit set (hardware)")
     parser.add_argument("--source", choices=("updates", "samples"), default="updates", help="replay stream to check")
@@ -31,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from taplan.robot import Robot
 
+    if args.file.suffix.lower() == ".mcap":
+        return _check_bag(args)
     trajectory = Trajectory.load(args.file)
     robot = Robot.teleavatar()
     all_limits = robot.limits if args.limits == "hardware" else robot.planning_limits
@@ -53,5 +59,23 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {png}")
     if args.json is not None:
         args.json.write_text(report.to_json())
+        print(f"wrote {args.json}")
+    return 0 if report.passed else 1
+
+
+def _check_bag(args: argparse.Namespace) -> int:
+    """A recorded run: commands (limits, steps, smoothness, timing), heartbeat gaps and measured positions."""
+    from taplan.robot import Robot
+    from taplan.ros.bag import read_run
+    from taplan.ros.run_check import check_run
+
+    robot = Robot.teleavatar()
+    limits = robot.limits if args.limits == "hardware" else robot.planning_limits
+    report = check_run(read_run(args.file), limits, Thresholds(check_jerk=not args.no_jerk), name=str(args.file))
+    print(report.table())
+    if args.json is not None:
+        import json
+
+        args.json.write_text(json.dumps(report.to_dict(), indent=2, default=float))
         print(f"wrote {args.json}")
     return 0 if report.passed else 1

@@ -1,0 +1,74 @@
+"""Drive the arms over ROS 2 (DDS): execute a saved plan, with the heartbeat, the rate and a safe stop handled.
+
+Waits for ``/{left,right}_arm/joint_states``, enables the robot (``/api/fsm/enable`` at 20 Hz, holding the measured
+position until ``/fsm_state`` is READY), then publishes the plan on ``/api/{side}_arm/joint_cmd`` at ``--rate``
+(50-77 Hz). It stops smoothly (jerk-limited, inside the limits) on Ctrl-C, on an error, when joint states stop for
+``--state-timeout`` and when the arm lags a command by more than ``--tracking-error``. FILE is any trajectory
+``taplan plan`` writes (it must start at the robot's current position). ``--hold SECONDS`` instead holds the current
+position (a heartbeat test). Writes what it sent and measured (``--record``, .npz) and the bag (``--bag``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from taplan.commands._ros_args import add_transport_arguments, open_transport
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", nargs="?", type=Path, help="trajectory file (.json, .csv, .npz) from `taplan plan`")
+    add_transport_arguments(parser)
+    parser.add_argument("--hold", type=float, default=None, help="hold the measured position this long [s]")
+    parser.add_argument("--rate", type=float, default=77.0, help="joint_cmd rate [Hz], 50-77 (77)")
+    parser.add_argument("--state-timeout", type=float, default=0.2, help="stop after this long without states [s]")
+    parser.add_argument("--tracking-error", type=float, default=0.15, help="abort above this error [rad] (0.15)")
+    parser.add_argument("--wait", type=float, default=5.0, help="wait this long for the first joint states [s]")
+    parser.add_argument("--disable", action="store_true", help="send /api/fsm/enable -1 at the end (robot pauses)")
+    parser.add_argument("--record", type=Path, default=None, help="write sent and measured streams (.npz)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from taplan.errors import InvalidInputError
+    from taplan.robot import Robot
+    from taplan.ros.runner import Runner, RunnerConfig
+    from taplan.trajectory import Trajectory
+
+    if (args.file is None) == (args.hold is None):
+        raise InvalidInputError("FILE / --hold", (args.file, args.hold), "a trajectory file or --hold SECONDS")
+    trajectory = Trajectory.load(args.file) if args.file is not None else None
+    config = RunnerConfig(
+        rate=args.rate,
+        state_timeout=args.state_timeout,
+        tracking_error=args.tracking_error,
+        wait_timeout=args.wait,
+        disable=args.disable,
+    )
+    interface, bag = open_transport(args)
+    robot = Robot.teleavatar()
+
+    def progress(t: float, _: float | None) -> None:
+        print(f"  t = {t:6.1f} s", flush=True)
+
+    try:
+        runner = Runner(interface, robot, config=config, on_progress=progress)
+        print(f"taplan run: waiting for joint states on ROS_DOMAIN_ID {interface.domain_id}", flush=True)
+        if trajectory is not None:
+            print(f"taplan run: executing {args.file} ({trajectory.duration:.2f} s) at {args.rate:g} Hz", flush=True)
+            result = runner.execute(trajectory)
+        else:
+            result = runner.stream(lambda t: None, args.hold)
+    finally:
+        interface.close()
+        if bag is not None:
+            bag.close()
+            print(f"wrote {bag.path} ({bag.count} messages)")
+    print(
+        f"taplan run: {result.status}: {result.reason}; {len(result.sent)} commands, {result.heartbeats} heartbeats, "
+        f"max tracking error {result.max_tracking_error:.4f} rad, final error {result.final_error:.4f} rad",
+        flush=True,
+    )
+    if args.record is not None:
+        result.save(args.record)
+        print(f"wrote {args.record}")
+    return 0 if result.status == "completed" else 1

@@ -1,0 +1,282 @@
+"""A simulated TeleAvatar on the other end of a :class:`~taplan.ros.RosInterface`: rehearse without the robot.
+
+It plays the robot's API mode: subscribes ``/api/{side}_arm/joint_cmd``, ``/api/fsm/enable`` and
+``/api/{side}_gripper/cmd``; publishes ``/{side}_arm/joint_states`` and ``/{side}_arm/current_ee_pose`` (default
+100 Hz, the real robot's rate) and ``/fsm_state`` (20 Hz). The rules are the guide's and the vendor simulator's
+(``API_NOTES.md`` §3-4):
+
+* **FSM.** ``PAUSE`` (0) holds the latched position. A finite enable > 0 refreshes the heartbeat; from ``PAUSE`` it
+  resets the target to the current position and enters ``SLOW_START`` (1), where the arm moves toward commands at
+  ``slow_start_speed``; ``READY`` (2) follows once both arms have commanded since enabling and stayed within
+  ``ready_tolerance`` of their targets for ``ready_cycles`` 20 Hz checks. An enable <= 0 pauses at once; no enable
+  for ``heartbeat_timeout`` (1 s) force-pauses. Non-finite enables are ignored.
+* **Commands.** Exactly 7 finite positions; names empty (index order) or exactly the arm's 7 names in any order.
+  Anything else is rejected with a log line (and counted in ``rejected``). Targets are clipped to the hardware
+  limits, as the robot does. Commands while paused are ignored.
+* **Motion.** The joint-mode model of :class:`taplan.reference.JointModeRobot`: each 10 ms tick the arm moves to the
+  latest target, at most the velocity ceiling times the tick.
+* **Gripper.** Commands in [0, 1]; others are rejected.
+
+Fault injection for tests: ``stall_after`` stops the joint_states after that time, as a frozen driver would.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+from taplan import api
+from taplan.errors import InvalidInputError
+from taplan.robot import Robot
+from taplan.ros.interface import RosInterface
+from taplan.ros.msg_definitions import FSM_STATE_TOPIC, INT32
+
+__all__ = ["FsmState", "SimConfig", "SimulatedRobot"]
+
+logger = logging.getLogger(__name__)
+
+
+class FsmState(IntEnum):
+    """The robot's FSM states as published on ``/fsm_state``."""
+
+    PAUSE = 0
+    SLOW_START = 1
+    READY = 2
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Rates and rules of the simulated robot.
+
+    Attributes:
+        state_rate: ``joint_states`` / ``current_ee_pose`` rate [Hz].
+        fsm_rate: FSM check and ``/fsm_state`` rate [Hz].
+        motion_rate: Motion model rate [Hz].
+        heartbeat_timeout: Force pause after this long without an enable [s].
+        slow_start_speed: Joint speed toward commands in SLOW_START [rad]/[s].
+        ready_tolerance: Largest |q - target| to become READY [rad].
+        ready_cycles: Consecutive FSM checks within tolerance to become READY.
+        stall_after: Stop publishing joint states after this time [s] (fault injection), or None.
+    """
+
+    state_rate: float = 100.0
+    fsm_rate: float = 20.0
+    motion_rate: float = 100.0
+    heartbeat_timeout: float = 1.0
+    slow_start_speed: float = 0.5
+    ready_tolerance: float = 0.08
+    ready_cycles: int = 5
+    stall_after: float | None = None
+
+
+class _Every:
+    """Due every ``1/rate`` seconds from the first call, skipping missed slots."""
+
+    def __init__(self, rate: float) -> None:
+        self.period = 1.0 / rate
+        self.next: float | None = None
+
+    def due(self, now: float) -> bool:
+        if self.next is None:
+            self.next = now
+        if now + 1e-9 < self.next:
+            return False
+        self.next = max(self.next + self.period, now - self.period / 2)
+        return True
+
+
+class SimulatedRobot:
+    """The TeleAvatar's API mode over ``interface``: call :meth:`step` often (>= the motion rate).
+
+    Args:
+        interface: Transport (:class:`~taplan.ros.DdsInterface`, or a fake for tests).
+        robot: Kinematic model (hardware limits, end-effector frames ``left_ee`` / ``right_ee``).
+        config: Rates and rules.
+        initial: Initial joint positions [rad], shape (14,), model order; default ``robot.home``.
+    """
+
+    def __init__(
+        self,
+        interface: RosInterface,
+        robot: Robot,
+        config: SimConfig | None = None,
+        initial: Any = None,
+    ) -> None:
+        self.interface = interface
+        self.robot = robot
+        self.config = config or SimConfig()
+        self.q = robot.home.copy() if initial is None else robot.check_configuration(initial, "initial").copy()
+        self.v = np.zeros_like(self.q)
+        self.target = self.q.copy()
+        self.lower, self.upper = robot.limits.lower, robot.limits.upper
+        self.speed = np.asarray(robot.limits.velocity, dtype=float)
+        self.fsm = FsmState.PAUSE
+        self.last_enable: float | None = None
+        self.commanded = dict.fromkeys(api.SIDES, False)
+        self.ready_count = 0
+        self.gripper = dict.fromkeys(api.SIDES, 0.0)
+        self.rejected: dict[str, int] = {}
+        self.transitions: list[tuple[float, FsmState, str]] = []
+        self.indices = {side: robot.indices(api.ARM_JOINT_NAMES[side]) for side in api.SIDES}
+        self.started: float | None = None
+        self._last_motion: float | None = None
+        self._state_timer = _Every(self.config.state_rate)
+        self._fsm_timer = _Every(self.config.fsm_rate)
+        self._motion_timer = _Every(self.config.motion_rate)
+        self._states = {s: interface.create_publisher(api.JOINT_STATE, api.Topics.joint_states(s)) for s in api.SIDES}
+        self._poses = {s: interface.create_publisher(api.POSE, api.Topics.current_ee_pose(s)) for s in api.SIDES}
+        self._fsm_publisher = interface.create_publisher(INT32, FSM_STATE_TOPIC)
+        for side in api.SIDES:
+            interface.create_subscription(api.JOINT_STATE, api.Topics.joint_cmd(side), self._on_command(side))
+            interface.create_subscription(api.FLOAT32, api.Topics.gripper(side), self._on_gripper(side))
+        interface.create_subscription(api.FLOAT32, api.Topics.ENABLE, self.on_enable)
+
+    # ------------------------------------------------------------------------------------------------ callbacks
+    def _reject(self, reason: str, topic: str, detail: str) -> None:
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+        logger.warning("rejected %s: %s", topic, detail)
+
+    def _on_command(self, side: str) -> Any:
+        return lambda fields: self.on_joint_cmd(side, fields)
+
+    def _on_gripper(self, side: str) -> Any:
+        return lambda fields: self.on_gripper(side, fields)
+
+    def on_joint_cmd(self, side: str, fields: dict[str, Any]) -> None:
+        """``/api/{side}_arm/joint_cmd``: validate, clip to the hardware limits, set the target."""
+        topic = api.Topics.joint_cmd(side)
+        expected = api.ARM_JOINT_NAMES[side]
+        names = [str(n) for n in fields.get("name", [])]
+        try:
+            q = np.asarray(fields.get("position", []), dtype=float)
+        except (TypeError, ValueError):
+            self._reject("malformed", topic, "positions are not numbers")
+            return
+        if q.shape != (len(expected),):
+            self._reject("length", topic, f"{q.size} positions, expected exactly {len(expected)}")
+            return
+        if names:
+            if sorted(names) != sorted(expected) or len(set(names)) != len(names):
+                self._reject("names", topic, f"names {names}, expected the 7 names {list(expected)} in any order")
+                return
+            q = q[[names.index(n) for n in expected]]
+        if not np.all(np.isfinite(q)):
+            self._reject("not_finite", topic, f"non-finite positions {q.tolist()}")
+            return
+        if self.fsm == FsmState.PAUSE:
+            self.rejected["paused"] = self.rejected.get("paused", 0) + 1
+            return
+        index = self.indices[side]
+        self.target[index] = np.clip(q, self.lower[index], self.upper[index])
+        self.commanded[side] = True
+
+    def on_enable(self, fields: dict[str, Any]) -> None:
+        """``/api/fsm/enable``: heartbeat (> 0), pause (<= 0); non-finite values are ignored."""
+        value = float(fields.get("data", math.nan))
+        now = self.interface.now()
+        if not math.isfinite(value):
+            self._reject("not_finite", api.Topics.ENABLE, f"enable {value}")
+            return
+        if value <= 0:
+            self.last_enable = None
+            self._enter(FsmState.PAUSE, now, "disabled")
+            return
+        self.last_enable = now
+        if self.fsm == FsmState.PAUSE:
+            self.target = self.q.copy()
+            self.commanded = dict.fromkeys(api.SIDES, False)
+            self.ready_count = 0
+            self._enter(FsmState.SLOW_START, now, "enabled")
+
+    def on_gripper(self, side: str, fields: dict[str, Any]) -> None:
+        """``/api/{side}_gripper/cmd``: a trigger value in [0, 1]."""
+        value = float(fields.get("data", math.nan))
+        if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+            self._reject("gripper_range", api.Topics.gripper(side), f"{value}, expected a value in [0, 1]")
+            return
+        self.gripper[side] = value
+
+    def _enter(self, state: FsmState, now: float, reason: str) -> None:
+        if state != self.fsm:
+            if state == FsmState.PAUSE:
+                self.target = self.q.copy()
+                self.v[:] = 0.0
+            logger.info("fsm %s -> %s (%s)", self.fsm.name, state.name, reason)
+            self.fsm = state
+            self.transitions.append((now, state, reason))
+
+    # ---------------------------------------------------------------------------------------------------- loop
+    def step(self, now: float | None = None) -> None:
+        """Advance the motion, the FSM and the publishers to ``now`` [s] (default the interface's time)."""
+        now = self.interface.now() if now is None else float(now)
+        if self.started is None:
+            self.started = now
+        if self._motion_timer.due(now):
+            self._move(now)
+        if self._fsm_timer.due(now):
+            self._check_fsm(now)
+            self._fsm_publisher.publish({"data": int(self.fsm)})
+        stalled = self.config.stall_after is not None and now - self.started >= self.config.stall_after
+        if self._state_timer.due(now) and not stalled:
+            self._publish_states()
+
+    def _move(self, now: float) -> None:
+        dt = 0.0 if self._last_motion is None else now - self._last_motion
+        self._last_motion = now
+        if dt <= 0.0 or self.fsm == FsmState.PAUSE:
+            self.v[:] = 0.0
+            return
+        cap = self.speed if self.fsm == FsmState.READY else np.full_like(self.q, self.config.slow_start_speed)
+        step = np.clip(self.target - self.q, -cap * dt, cap * dt)
+        self.q = self.q + step
+        self.v = step / dt
+
+    def _check_fsm(self, now: float) -> None:
+        if self.fsm == FsmState.PAUSE:
+            return
+        if self.last_enable is None or now - self.last_enable > self.config.heartbeat_timeout:
+            self.last_enable = None
+            self._enter(FsmState.PAUSE, now, f"no heartbeat for {self.config.heartbeat_timeout:g} s: force pause")
+            return
+        if self.fsm == FsmState.SLOW_START:
+            close = float(np.max(np.abs(self.q - self.target))) <= self.config.ready_tolerance
+            self.ready_count = self.ready_count + 1 if close and all(self.commanded.values()) else 0
+            if self.ready_count >= self.config.ready_cycles:
+                self._enter(FsmState.READY, now, "commands tracked")
+
+    def _publish_states(self) -> None:
+        poses = self.robot.frame_poses(self.q, ("left_ee", "right_ee"))
+        for side in api.SIDES:
+            index = self.indices[side]
+            names = list(api.ARM_JOINT_NAMES[side])
+            fields = {
+                "name": names,
+                "position": self.q[index].tolist(),
+                "velocity": self.v[index].tolist(),
+                "effort": [0.0] * len(names),
+            }
+            self._states[side].publish(fields)
+            self._poses[side].publish(_pose_fields(poses[f"{side}_ee"]))
+
+
+def _pose_fields(T: np.ndarray) -> dict[str, Any]:
+    import pinocchio as pin
+
+    x, y, z, w = pin.Quaternion(T[:3, :3]).coeffs()
+    p = T[:3, 3]
+    return {
+        "position": {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])},
+        "orientation": {"x": float(x), "y": float(y), "z": float(z), "w": float(w)},
+    }
+
+
+def check_rate(rate: float, name: str) -> float:
+    """A positive finite rate [Hz]."""
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
+        raise InvalidInputError(name, rate, "a rate > 0 Hz")
+    return float(rate)
