@@ -85,13 +85,17 @@ class BagWriter:
 
 def read_messages(path: str | Path, topics: list[str] | None = None) -> list[tuple[str, int, Any]]:
     """``(topic, log time [ns], decoded message)`` of every message in the bag, in log-time order."""
-    from mcap_ros2.reader import read_ros2_messages
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
 
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError("bag", str(path), "an existing .mcap file")
     try:
-        return [(m.channel.topic, m.log_time_ns, m.ros_msg) for m in read_ros2_messages(str(path), topics=topics)]
+        with open(path, "rb") as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            decoded = reader.iter_decoded_messages(topics=topics, log_time_order=True)
+            return [(channel.topic, message.log_time, msg) for _, channel, message, msg in decoded]
     except Exception as exc:  # the mcap readers raise many kinds on a damaged file
         raise InvalidInputError(
             "bag", str(path), f"a readable rosbag2 MCAP file ({type(exc).__name__}: {exc})"

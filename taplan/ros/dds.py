@@ -101,7 +101,8 @@ class _Publisher:
 
     def publish(self, fields: dict[str, Any]) -> None:
         interface = self._interface
-        self._writer.write(interface.messages.to_idl(self.msg_type, fields, time.time()))
+        stamp = fields.get("stamp", time.time())  # a JointState's header stamp [s]: now unless given
+        self._writer.write(interface.messages.to_idl(self.msg_type, fields, stamp))
         self.count += 1
         if interface.recorder is not None:
             interface.recorder.record(self.topic, self.msg_type, fields, time.time_ns())

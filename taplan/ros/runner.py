@@ -250,6 +250,9 @@ class Runner:
             self.interface.spin_once()  # type: ignore[attr-defined]
             if self.fsm_state == READY:
                 return
+            state = self.measured()
+            if state is None or state[0] > self.config.state_timeout:
+                raise RunError("joint states stopped while enabling the robot: nothing was moved")
             if now >= end:
                 if self.fsm_state is None:
                     logger.warning("no /fsm_state within %.1f s: driving without it", self.config.ready_timeout)
