@@ -235,3 +235,51 @@ def test_runner_without_robot_times_out_and_ignores_malformed_states(robot) -> N
     assert runner.rejected_states == 3
     interface.close()
     fake_robot.close()
+
+
+def test_streams_joint_and_pose_targets(robot, start_sim) -> None:
+    from taplan.ros.targets import TargetFeed
+    from taplan.stream import PoseStreamer
+
+    sim = start_sim()
+    interface = DdsInterface(sim.domain, config=loopback_config())
+    runner = Runner(interface, robot)
+    start = runner.wait_for_state()
+    goal = start.copy()
+    goal[:7] += 0.1
+    lines = ["not json", '{"t": 0.0, "q": [0.0]}', f'{{"t": 0.1, "q": {goal.tolist()}}}']
+    feed = TargetFeed(lines, robot, start)
+    result = runner.stream(feed, 1.5)
+    assert result.status == "completed", result.reason
+    assert feed.skipped == 2
+    np.testing.assert_allclose(runner.measured()[1], goal, atol=GOAL_TOL)
+
+    T = robot.frame_pose(goal, "left_ee")
+    T[:3, 3] += [0.0, 0.0, -0.03]  # 3 cm down [m]
+    streamer = PoseStreamer(robot, runner.period, frames=("left_ee",), timeout=None)
+    result = runner.stream(lambda t: {"left_ee": T}, 2.0, streamer=streamer)
+    interface.spin_for(0.2)
+    reached = robot.frame_pose(runner.measured()[1], "left_ee")
+    interface.close()
+    assert result.status == "completed", result.reason
+    assert np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 2e-3  # [m]
+    assert _within_hardware_limits(robot, result.sent)
+
+
+def test_cli_run_executes_a_plan_file_and_records_a_bag(robot, start_sim, tmp_path: Path) -> None:
+    sim = start_sim()
+    plan = tmp_path / "plan.json"
+    _plan(robot, robot.home, 0.2).save(plan)
+    bag_path = tmp_path / "cli.mcap"
+    record = tmp_path / "run.npz"
+    command = [sys.executable, "-m", "taplan", "run", str(plan), "--loopback", "--domain-id", str(sim.domain)]
+    command += ["--bag", str(bag_path), "--record", str(record), "--rate", "50"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "completed" in done.stdout
+    saved = np.load(record)
+    assert saved["sent"].shape[1] == 14 and str(saved["status"]) == "completed"
+    run = read_run(bag_path)
+    assert check_run(run, robot.limits).passed
+    period = np.median(np.diff(run.commanded["left"].times))
+    assert abs(period - 1 / 50) < 2e-3  # commands at the chosen 50 Hz [s]

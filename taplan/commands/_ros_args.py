@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -20,8 +21,13 @@ def add_transport_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-v", "--verbose", action="store_true", help="log every event (default: warnings)")
 
 
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
 def open_transport(args: argparse.Namespace) -> tuple[Any, Any]:
-    """(DdsInterface, BagWriter or None) from the parsed options; logging to stderr."""
+    """(DdsInterface, BagWriter or None) from the parsed options; logging to stderr; SIGTERM acts as Ctrl-C."""
+    signal.signal(signal.SIGTERM, _interrupt)
     from taplan.ros.bag import BagWriter
     from taplan.ros.dds import DdsInterface, loopback_config
 

@@ -4,8 +4,10 @@ Waits for ``/{left,right}_arm/joint_states``, enables the robot (``/api/fsm/enab
 position until ``/fsm_state`` is READY), then publishes the plan on ``/api/{side}_arm/joint_cmd`` at ``--rate``
 (50-77 Hz). It stops smoothly (jerk-limited, inside the limits) on Ctrl-C, on an error, when joint states stop for
 ``--state-timeout`` and when the arm lags a command by more than ``--tracking-error``. FILE is any trajectory
-``taplan plan`` writes (it must start at the robot's current position). ``--hold SECONDS`` instead holds the current
-position (a heartbeat test). Writes what it sent and measured (``--record``, .npz) and the bag (``--bag``).
+``taplan plan`` writes (it must start at the robot's current position). ``--targets FILE|-`` instead streams live
+targets for ``--duration`` seconds (JSON lines of joint or pose targets, see :mod:`taplan.ros.targets`) through the
+jerk-limited joint or pose streamer; ``--hold SECONDS`` holds the current position (a heartbeat test). Writes what
+it sent and measured (``--record``, .npz) and the bag (``--bag``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", nargs="?", type=Path, help="trajectory file (.json, .csv, .npz) from `taplan plan`")
     add_transport_arguments(parser)
     parser.add_argument("--hold", type=float, default=None, help="hold the measured position this long [s]")
+    parser.add_argument("--targets", default=None, help="stream JSON-line targets from this file ('-': stdin)")
+    parser.add_argument("--duration", type=float, default=None, help="how long to stream --targets [s]")
     parser.add_argument("--rate", type=float, default=77.0, help="joint_cmd rate [Hz], 50-77 (77)")
     parser.add_argument("--state-timeout", type=float, default=0.2, help="stop after this long without states [s]")
     parser.add_argument("--tracking-error", type=float, default=0.15, help="abort above this error [rad] (0.15)")
@@ -34,8 +38,13 @@ def run(args: argparse.Namespace) -> int:
     from taplan.ros.runner import Runner, RunnerConfig
     from taplan.trajectory import Trajectory
 
-    if (args.file is None) == (args.hold is None):
-        raise InvalidInputError("FILE / --hold", (args.file, args.hold), "a trajectory file or --hold SECONDS")
+    modes = [x is not None for x in (args.file, args.hold, args.targets)]
+    if sum(modes) != 1:
+        raise InvalidInputError(
+            "FILE / --hold / --targets", (args.file, args.hold, args.targets), "exactly one of the three"
+        )
+    if args.targets is not None and args.duration is None:
+        raise InvalidInputError("--duration", None, "a streaming time [s] with --targets")
     trajectory = Trajectory.load(args.file) if args.file is not None else None
     config = RunnerConfig(
         rate=args.rate,
@@ -56,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
         if trajectory is not None:
             print(f"taplan run: executing {args.file} ({trajectory.duration:.2f} s) at {args.rate:g} Hz", flush=True)
             result = runner.execute(trajectory)
+        elif args.targets is not None:
+            result = _stream_targets(runner, robot, args)
         else:
             result = runner.stream(lambda t: None, args.hold)
     finally:
@@ -72,3 +83,25 @@ def run(args: argparse.Namespace) -> int:
         result.save(args.record)
         print(f"wrote {args.record}")
     return 0 if result.status == "completed" else 1
+
+
+def _stream_targets(runner, robot, args: argparse.Namespace):  # noqa: ANN001, ANN202 (CLI glue)
+    import sys
+
+    from taplan.ros.targets import TargetFeed, parse_target
+    from taplan.stream import PoseStreamer
+
+    lines = sys.stdin if args.targets == "-" else open(args.targets)  # noqa: SIM115 (read by the feed thread)
+    start = runner.wait_for_state()
+    feed = TargetFeed(lines, robot, start)
+    streamer = None
+    if args.targets != "-":  # a file: look at its first target to pick the streamer
+        with open(args.targets) as probe:
+            first = next((line for line in probe if line.strip()), None)
+        if first is not None and parse_target(first, robot, start)[1] == "pose":
+            streamer = PoseStreamer(robot, runner.period, timeout=None)
+    print(f"taplan run: streaming targets from {args.targets} for {args.duration:g} s at {args.rate:g} Hz", flush=True)
+    result = runner.stream(feed, args.duration, streamer=streamer)
+    if feed.skipped:
+        print(f"taplan run: skipped {feed.skipped} target line(s)", flush=True)
+    return result

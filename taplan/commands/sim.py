@@ -18,6 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_transport_arguments(parser)
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
     parser.add_argument("--rate", type=float, default=100.0, help="joint_states / current_ee_pose rate [Hz] (100)")
+    parser.add_argument("--motion-rate", type=float, default=100.0, help="motion model rate [Hz] (100, the robot's)")
     parser.add_argument(
         "--stall-after", type=float, default=None, help="fault injection: stop joint_states after this many seconds"
     )
@@ -27,7 +28,11 @@ def run(args: argparse.Namespace) -> int:
     from taplan.robot import Robot
     from taplan.ros.sim import SimConfig, SimulatedRobot, check_rate
 
-    config = SimConfig(state_rate=check_rate(args.rate, "--rate"), stall_after=args.stall_after)
+    config = SimConfig(
+        state_rate=check_rate(args.rate, "--rate"),
+        motion_rate=check_rate(args.motion_rate, "--motion-rate"),
+        stall_after=args.stall_after,
+    )
     interface, bag = open_transport(args)
     robot = Robot.teleavatar()
     sim = SimulatedRobot(interface, robot, config)

@@ -114,6 +114,11 @@ class RclpyInterface:
     def now(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
 
+    def spin_once(self) -> int:
+        """Run the node's ready callbacks without waiting (the :class:`~taplan.ros.Runner` loop calls it)."""
+        require_rclpy().spin_once(self.node, timeout_sec=0.0)
+        return 0
+
 
 def to_message(cls: type, fields: dict[str, Any]) -> Any:
     """Fill a ROS message of class ``cls`` from taplan's plain fields."""

@@ -296,16 +296,32 @@ class Runner:
         acceleration[:, index] = trajectory(times + trajectory.times[0], 2)
         return self._drive(lambda k: (commands[k], velocity[k], acceleration[k]) if k < len(times) else None)
 
-    def stream(self, targets: Callable[[float], np.ndarray | None], duration: float) -> RunResult:
-        """Stream live joint targets for ``duration`` [s] through a jerk-limited :class:`JointStreamer`.
+    def stream(
+        self,
+        targets: Callable[[float], Any],
+        duration: float,
+        *,
+        streamer: Any = None,
+    ) -> RunResult:
+        """Stream live targets for ``duration`` [s] through a jerk-limited streamer, at the arm rate.
 
-        ``targets(t)`` is called every period with the time since the start [s] and returns a new target (14,) in
-        model order [rad], or None to keep the previous one.
+        ``targets(t)`` is called every period with the time since the start [s] and returns a new target, or None
+        to keep the previous one: joint positions (14,) in model order [rad] for the default
+        :class:`~taplan.stream.JointStreamer`, or ``{frame: T_root_frame}`` for a
+        :class:`~taplan.stream.PoseStreamer` passed as ``streamer`` (same ``dt`` as the arm period). A target the
+        streamer refuses (a :class:`~taplan.TaplanError`: NaN, wrong shape) is logged and skipped.
         """
+        if not (isinstance(duration, (int, float)) and np.isfinite(duration) and duration > 0):
+            raise InvalidInputError("duration", duration, "a positive time [s]")
         start_q = self.wait_for_state()
-        streamer = JointStreamer(self.limits, self.period, timeout=None)
-        streamer.reset(start_q, clamp=True)
-        self.arm(streamer.state.position)
+        if streamer is None:
+            streamer = JointStreamer(self.limits, self.period, timeout=None)
+            initial = streamer.reset(start_q, clamp=True)
+        else:
+            if abs(streamer.dt - self.period) > 1e-9:
+                raise InvalidInputError("streamer.dt", streamer.dt, f"the arm period {self.period:.6g} s")
+            initial = streamer.reset(start_q)
+        self.arm(np.asarray(initial.position))
         steps = int(np.ceil(duration / self.period))
 
         def command(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -313,7 +329,10 @@ class Runner:
                 return None
             target = targets(k * self.period)
             if target is not None:
-                streamer.set_target(target)
+                try:
+                    streamer.set_target(target)
+                except TaplanError as exc:
+                    logger.warning("skipping a target: %s", exc)
             state = streamer.step()
             return state.position, state.velocity, state.acceleration
 
