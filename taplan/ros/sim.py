@@ -24,6 +24,9 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -211,6 +214,32 @@ class SimulatedRobot:
             self.transitions.append((now, state, reason))
 
     # ---------------------------------------------------------------------------------------------------- loop
+    def start(self, period: float = 0.0005) -> Callable[[], None]:
+        """Run the robot on a daemon thread (``interface.spin_once()`` then :meth:`step`, every ``period`` [s]).
+
+        For rehearsals in one process; ``taplan sim`` runs it in its own. Returns ``stop()``, which joins the
+        thread and closes the interface.
+        """
+        done = threading.Event()
+
+        def loop() -> None:
+            while not done.is_set():
+                self.interface.spin_once()  # type: ignore[attr-defined]
+                self.step()
+                time.sleep(period)
+
+        thread = threading.Thread(target=loop, name="taplan-sim", daemon=True)
+        thread.start()
+
+        def stop() -> None:
+            done.set()
+            thread.join(timeout=5.0)
+            close = getattr(self.interface, "close", None)
+            if close is not None:
+                close()
+
+        return stop
+
     def step(self, now: float | None = None) -> None:
         """Advance the motion, the FSM and the publishers to ``now`` [s] (default the interface's time)."""
         now = self.interface.now() if now is None else float(now)
