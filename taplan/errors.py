@@ -18,6 +18,8 @@ __all__ = [
     "SolverError",
     "TimingError",
     "StreamError",
+    "CollisionError",
+    "PlanningError",
 ]
 
 
@@ -91,3 +93,25 @@ class StreamError(TaplanError):
 def _abbreviate(value: Any, limit: int = 120) -> str:
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class CollisionError(TaplanError):
+    """A configuration (or a path) is in collision; names the pair and the penetration depth.
+
+    Attributes:
+        argument: What was checked (``"start"``, ``"goal"``, ...).
+        pair: The colliding bodies ``(robot body, other body or obstacle)``.
+        depth: Penetration depth [m] (>= 0), or how far inside the required clearance.
+    """
+
+    def __init__(self, argument: str, pair: tuple[str, str], depth: float, detail: str = "") -> None:
+        self.argument = argument
+        self.pair = tuple(pair)
+        self.depth = float(depth)
+        super().__init__(
+            f"{argument}: {pair[0]} collides with {pair[1]} (penetration {depth * 1e3:.1f} mm){detail}"
+        )
+
+
+class PlanningError(TaplanError):
+    """No collision-free motion was found; the message says which stage failed and why."""

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
-from taplan.collision import Capsule, segment_closest_points
+from taplan.scene.capsules import Capsule, segment_closest_points
 from taplan.errors import InvalidInputError
 from taplan.ik._kinematics import Kinematics
 from taplan.ik.limits.limit import RowLimit, StepContext
@@ -195,7 +195,7 @@ class CollisionLimit(RowLimit):
 
 class _PairArrays:
     """All capsule pairs' distances and gradients at once (the same closed form as
-    :func:`~taplan.collision.segment_closest_points` and :func:`capsule_pair_distance`, vectorised over pairs).
+    :func:`~taplan.scene.capsules.segment_closest_points` and :func:`capsule_pair_distance`, vectorised over pairs).
 
     Gradients use the world-frame joint Jacobians of ``computeJointJacobians``: a point ``x`` carried by joint
     ``k``'s chain moves at ``J_v,j + J_ω,j × x`` per unit of joint ``j``, so ``∂(n·x)/∂q_j = n·J_v,j + J_ω,j·(x × n)``.

@@ -1,0 +1,245 @@
+"""taplan.scene: shapes, scene files and their errors, attach/detach, signed distances vs coal, Jacobians vs finite
+differences, broad phase vs brute force."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import coal
+import numpy as np
+import pytest
+
+import taplan
+from taplan.errors import CollisionError, InvalidInputError, UnknownNameError
+from taplan.scene import (
+    Box,
+    Capsule,
+    CollisionWorld,
+    Cylinder,
+    HalfSpace,
+    Mesh,
+    Scene,
+    Sphere,
+    load_scene,
+    save_scene,
+    scene_from_dict,
+)
+
+MODELS = Path(__file__).resolve().parents[1] / "models" / "teleavatar" / "scenes"
+DIST_TOL = 1e-6  # [m] closed form vs coal
+FD_TOL = 1e-4  # [m/rad] Jacobian vs central differences (h = 1e-6 rad)
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _cluttered() -> Scene:
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.add("ball", Sphere(0.05), ([0.45, 0.3, -0.2], [0, 0, 0, 1]))
+    scene.add("pillar", Cylinder(0.04, 0.6), ([0.5, 0.0, -0.1], [0, 0, 0, 1]))
+    scene.add("bar", Capsule(0.02, 0.4), ([0.35, -0.3, 0.0], [0.7071068, 0, 0, 0.7071068]))
+    scene.add("floor", HalfSpace(), ([0, 0, -0.9], [0, 0, 0, 1]))
+    return scene
+
+
+def _random_states(robot: taplan.Robot, count: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    lo, hi = robot.planning_limits.lower, robot.planning_limits.upper
+    return lo + rng.uniform(0, 1, (count, robot.nq)) * (hi - lo)
+
+
+def test_shapes_validate_their_sizes() -> None:
+    with pytest.raises(InvalidInputError, match="size"):
+        Box((0.1, -0.2, 0.3))
+    with pytest.raises(InvalidInputError, match="radius"):
+        Sphere(float("nan"))
+    with pytest.raises(InvalidInputError, match="faces"):
+        Mesh(np.eye(3), np.array([[0, 1, 5]]))
+    assert Box([0.1, 0.2, 0.3]).bounding_radius() == pytest.approx(0.5 * math.sqrt(0.14))
+
+
+def test_scene_add_move_remove_and_versions() -> None:
+    scene = Scene()
+    scene.add("a", Sphere(0.1), np.eye(4))
+    v = scene.version
+    scene.move("a", ([0.1, 0.0, 0.0], [0, 0, 0, 1]))
+    assert scene.version == v + 1
+    np.testing.assert_allclose(scene.obstacles["a"].pose[:3, 3], [0.1, 0.0, 0.0])
+    with pytest.raises(InvalidInputError, match="name"):
+        scene.add("a", Sphere(0.1))
+    with pytest.raises(UnknownNameError):
+        scene.move("b", np.eye(4))
+    with pytest.raises(InvalidInputError, match="pose"):
+        scene.add("c", Sphere(0.1), ([np.nan, 0, 0], [0, 0, 0, 1]))
+    scene.remove("a")
+    assert len(scene) == 0
+
+
+def test_scene_file_round_trip(tmp_path: Path) -> None:
+    scene = load_scene(MODELS / "table.yaml")
+    assert set(scene.obstacles) == {"table", "box"}
+    scene.attach("cup", Cylinder(0.04, 0.1), "left_tcp", ([0.0, 0.0, 0.08], [0, 0, 0, 1]))
+    for suffix in (".yaml", ".json"):
+        path = tmp_path / f"scene{suffix}"
+        save_scene(scene, path)
+        again = load_scene(path)
+        assert set(again.obstacles) == set(scene.obstacles) and set(again.attached) == {"cup"}
+        np.testing.assert_allclose(again.obstacles["box"].pose, scene.obstacles["box"].pose, atol=1e-12)
+        assert again.obstacles["table"].shape == scene.obstacles["table"].shape
+
+
+@pytest.mark.parametrize(
+    ("data", "field"),
+    [
+        (None, "scene"),
+        ({}, "scene"),
+        (
+            {"obstacles": [{"name": "t", "shape": {"type": "cone"}, "pose": {"xyz": [0, 0, 0]}}]},
+            "obstacles[0].shape.type",
+        ),
+        ({"obstacles": [{"name": "t", "shape": {"type": "box", "size": [1, 1]}, "pose": {"xyz": [0, 0, 0]}}]}, "size"),
+        ({"obstacles": [{"name": "t", "shape": {"type": "sphere", "radius": 0.1}, "pose": {"xyz": [0, 0]}}]}, "xyz"),
+        (
+            {
+                "obstacles": [
+                    {
+                        "name": "t",
+                        "shape": {"type": "sphere", "radius": 0.1},
+                        "pose": {"xyz": [0, 0, 0], "xyzw": [0, 0, 0, 2]},
+                    }
+                ]
+            },
+            "xyzw",
+        ),
+        ({"obstacles": [{"name": "t", "shape": {"type": "sphere", "radius": 0.1}}]}, "obstacles[0]"),
+        ({"tables": []}, "scene"),
+    ],
+)
+def test_bad_scene_files_name_the_field(data, field) -> None:
+    with pytest.raises(InvalidInputError, match=field.replace("[", r"\[").replace("]", r"\]")):
+        scene_from_dict(data)
+
+
+def test_empty_scene_file(tmp_path: Path) -> None:
+    path = tmp_path / "empty.yaml"
+    path.write_text("")
+    with pytest.raises(InvalidInputError, match="empty scene file"):
+        load_scene(path)
+
+
+def test_self_distances_match_coal(robot) -> None:
+    world = CollisionWorld(robot)
+    request = coal.DistanceRequest()
+    request.enable_signed_distance = True
+    for q in _random_states(robot, 20, 1):
+        d = world.distances(q, jacobian=False)
+        transforms = world._body_transforms()
+        index = {b.name: k for k, b in enumerate(world.bodies)}
+        for (a, b), value in zip(d.pairs, d.distance, strict=True):
+            ga, ta = world._body_geometry_at(index[a], transforms)
+            gb, tb = world._body_geometry_at(index[b], transforms)
+            reference = coal.distance(ga, ta, gb, tb, request, coal.DistanceResult())
+            if value > 0:
+                assert value == pytest.approx(reference, abs=DIST_TOL)
+            else:
+                assert reference < 1e-9  # both see the overlap
+
+
+def test_obstacle_distances_and_witness_points(robot) -> None:
+    world = CollisionWorld(robot, _cluttered())
+    for q in _random_states(robot, 10, 2):
+        d = world.distances(q, jacobian=False)
+        gap = np.einsum("ij,ij->i", d.point_a - d.point_b, d.normal)
+        positive = d.distance > 1e-6
+        np.testing.assert_allclose(gap[positive], d.distance[positive], atol=1e-6)  # d = n · (p_a - p_b) [m]
+        np.testing.assert_allclose(np.linalg.norm(d.normal, axis=1), 1.0, atol=1e-9)
+
+
+def test_penetration_is_negative_and_named_in_mm(robot) -> None:
+    q = robot.home
+    hand = robot.frame_pose(q, "left_ee")[:3, 3]
+    scene = Scene()
+    scene.add("block", Box((0.1, 0.1, 0.1)), (hand.tolist(), [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    d, pair = world.min_distance(q)
+    assert d < -0.01 and "block" in pair  # [m]
+    with pytest.raises(CollisionError, match=r"collides with block \(penetration \d+\.\d mm\)") as info:
+        world.check_configuration(q, "start")
+    assert info.value.depth == pytest.approx(-d)
+    assert info.value.argument == "start"
+
+
+def test_jacobians_match_finite_differences(robot) -> None:
+    world = CollisionWorld(robot, _cluttered())
+    h = 1e-6
+    checked = 0
+    for q in _random_states(robot, 8, 3):
+        d = world.distances(q)
+        for k, pair in enumerate(d.pairs):
+            if d.distance[k] < 0.01 or d.distance[k] > 0.5:  # away from contact and from coal's far-field
+                continue
+            numeric = np.zeros(robot.nq)
+            for j in range(robot.nq):
+                step = np.zeros(robot.nq)
+                step[j] = h
+                plus = world.distances(q + step, jacobian=False)
+                minus = world.distances(q - step, jacobian=False)
+                numeric[j] = (plus.distance[plus.pairs.index(pair)] - minus.distance[minus.pairs.index(pair)]) / (2 * h)
+            np.testing.assert_allclose(d.jacobian[k], numeric, atol=FD_TOL, err_msg=str(pair))
+            checked += 1
+            break  # one pair per state keeps the test short
+    assert checked >= 6
+
+
+def test_broad_phase_keeps_every_pair_within_the_cutoff(robot) -> None:
+    scene = _cluttered()
+    rng = np.random.default_rng(5)
+    for i in range(40):
+        scene.add(
+            f"clutter{i}",
+            Box(tuple(rng.uniform(0.03, 0.1, 3))),
+            (rng.uniform([0.2, -0.6, -0.6], [0.9, 0.6, 0.3]).tolist(), [0, 0, 0, 1]),
+        )
+    world = CollisionWorld(robot, scene)
+    for q in _random_states(robot, 5, 6):
+        full = world.distances(q, jacobian=False)
+        near = world.distances(q, cutoff=0.05, jacobian=False)
+        expected = {p for p, d in zip(full.pairs, full.distance, strict=True) if d <= 0.05}
+        assert expected == set(near.pairs)
+        assert len(near) < len(full)
+
+
+def test_attached_object_moves_with_the_hand(robot) -> None:
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.attach("cup", Sphere(0.05), "left_tcp", ([0.0, 0.0, 0.0], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    q = robot.home
+    d = world.distances(q)
+    k = d.pairs.index(("cup", "table"))
+    tcp = robot.frame_pose(q, "left_tcp")[:3, 3]
+    expected = tcp[2] - 0.05 - (-0.42 + 0.02)
+    assert d.distance[k] == pytest.approx(expected, abs=1e-6)
+    # the cup's distance changes with the left arm only
+    assert np.abs(d.jacobian[k, 7:]).max() < 1e-12 and np.abs(d.jacobian[k, :7]).max() > 1e-3
+    T = robot.frame_pose(q, "left_tcp")
+    scene.detach("cup", T)
+    assert "cup" in scene.obstacles
+    np.testing.assert_allclose(scene.obstacles["cup"].pose[:3, 3], tcp, atol=1e-12)
+
+
+def test_point_travel_bound_is_an_upper_bound(robot) -> None:
+    world = CollisionWorld(robot)
+    rng = np.random.default_rng(7)
+    for q in _random_states(robot, 20, 8):
+        dq = rng.uniform(-0.05, 0.05, robot.nq)
+        world.distances(q, jacobian=False)
+        before = [world.data.oMi[b.joint].act(b.end) for b in world.bodies]
+        world.distances(q + dq, jacobian=False)
+        after = [world.data.oMi[b.joint].act(b.end) for b in world.bodies]
+        travel = max(np.linalg.norm(a - b) for a, b in zip(before, after, strict=True))
+        assert travel <= world.max_point_speed_bound(q, q + dq) + 1e-12
