@@ -108,9 +108,7 @@ class CollisionError(TaplanError):
         self.argument = argument
         self.pair = tuple(pair)
         self.depth = float(depth)
-        super().__init__(
-            f"{argument}: {pair[0]} collides with {pair[1]} (penetration {depth * 1e3:.1f} mm){detail}"
-        )
+        super().__init__(f"{argument}: {pair[0]} collides with {pair[1]} (penetration {depth * 1e3:.1f} mm){detail}")
 
 
 class PlanningError(TaplanError):

@@ -18,9 +18,9 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan._validation import as_matrix, as_vector
-from taplan.scene.capsules import Capsule, capsules_from_urdf
 from taplan.errors import ConfigError, InvalidInputError, UnknownNameError
 from taplan.limits import DEFAULT_PLANNING_SCALING, JointLimits
+from taplan.scene.capsules import Capsule, capsules_from_urdf
 
 __all__ = [
     "Robot",

@@ -7,10 +7,10 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
-from taplan.scene.capsules import Capsule, segment_closest_points
 from taplan.errors import InvalidInputError
 from taplan.ik._kinematics import Kinematics
 from taplan.ik.limits.limit import RowLimit, StepContext
+from taplan.scene.capsules import Capsule, segment_closest_points
 
 __all__ = ["CollisionLimit", "capsule_pair_distance"]
 
