@@ -22,7 +22,6 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan.errors import CollisionError, InvalidInputError
-from taplan.scene.capsules import segment_closest_points
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import Scene
 from taplan.scene.shapes import HalfSpace
@@ -44,6 +43,8 @@ class Distances:
         point_b: Witness points on the second [m]. Shape (P, 3).
         normal: Unit vectors from b to a (the direction that increases the distance). Shape (P, 3).
         jacobian: ``∂distance/∂q`` [m/rad]. Shape (P, nv), or None when not asked for.
+        travel: Per pair, reach coefficients [m/rad]: between two configurations on a straight joint-space segment
+            the pair's distance changes by at most ``travel @ |Δq|``. Shape (P, nv).
     """
 
     pairs: tuple[tuple[str, str], ...]
@@ -52,6 +53,7 @@ class Distances:
     point_b: np.ndarray
     normal: np.ndarray
     jacobian: np.ndarray | None
+    travel: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -109,6 +111,11 @@ class CollisionWorld:
             for j in range(i + 1, len(self.bodies))
             if self_collision and frozenset((self.bodies[i].name, self.bodies[j].name)) not in self.allowed
         ]
+        self._self_index = (
+            np.array([i for i, _ in self.self_pairs], dtype=int),
+            np.array([j for _, j in self.self_pairs], dtype=int),
+        )
+        self._radius = np.array([b.radius for b in self.bodies])
         self._body_geometry = []
         for b in self.bodies:
             length = float(np.linalg.norm(b.end - b.start))
@@ -121,20 +128,28 @@ class CollisionWorld:
         self._request.enable_signed_distance = True
 
     # ----------------------------------------------------------------------------------------------- helpers
+    def _chain_reach(self, joint: int, extent: float) -> np.ndarray:
+        """Per joint, an upper bound [m] on the distance from its axis origin to a point within ``extent`` of the
+        origin of ``joint``'s frame (triangle inequality along the chain); zero for joints that do not move it."""
+        model = self.model
+        row = np.zeros(model.nv)
+        along = extent
+        j = joint
+        while j > 0:
+            row[model.joints[j].idx_v] = along
+            along += float(np.linalg.norm(model.jointPlacements[j].translation))
+            j = model.parents[j]
+        return row
+
     def _reach(self) -> np.ndarray:
         """Per joint, an upper bound [m] on the distance from its origin to any body point it moves."""
-        model = self.model
-        reach = np.zeros(model.nv)
-        for b in self.bodies:
-            extent = max(np.linalg.norm(b.start), np.linalg.norm(b.end)) + b.radius
-            j = b.joint
-            along = extent
-            while j > 0:
-                reach[model.joints[j].idx_v] = max(reach[model.joints[j].idx_v], along)
-                along += np.linalg.norm(model.jointPlacements[j].translation)
-                j = model.parents[j]
-        # attached objects hang off frames: their extent is added when the scene has them
-        return reach
+        self._body_reach = np.array(
+            [
+                self._chain_reach(b.joint, max(np.linalg.norm(b.start), np.linalg.norm(b.end)) + b.radius)
+                for b in self.bodies
+            ]
+        ).reshape(len(self.bodies), self.model.nv)
+        return self._body_reach.max(axis=0) if len(self.bodies) else np.zeros(self.model.nv)
 
     def _refresh(self) -> None:
         if self.scene.version == self._version:
@@ -149,13 +164,8 @@ class CollisionWorld:
             self._attached.append(item)
             placement = self.model.frames[frame].placement.translation
             extent = float(np.linalg.norm(placement) + np.linalg.norm(a.pose[:3, 3]) + a.shape.bounding_radius())
-            j = parent
-            along = extent
-            while j > 0:
-                idx = self.model.joints[j].idx_v
-                self.reach[idx] = max(self.reach[idx], along)
-                along += np.linalg.norm(self.model.jointPlacements[j].translation)
-                j = self.model.parents[j]
+            item.reach = self._chain_reach(parent, extent)
+            self.reach = np.maximum(self.reach, item.reach)
         self._version = self.scene.version
 
     def _configuration(self, q: npt.ArrayLike, name: str = "q") -> np.ndarray:
@@ -179,21 +189,24 @@ class CollisionWorld:
         pb_list: list[np.ndarray] = []
         normals: list[np.ndarray] = []
         owners: list[tuple[int, int]] = []  # (joint of a, joint of b) for the Jacobian; -1: fixed
-        for i, j in self.self_pairs:
-            a, b = self.bodies[i], self.bodies[j]
-            pa, pb, _, _ = segment_closest_points(*segments[i], *segments[j])
-            delta = pa - pb
-            norm = float(np.linalg.norm(delta))
-            d = norm - a.radius - b.radius
-            if d > cutoff:
-                continue
-            n = delta / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-            names.append((a.name, b.name))
-            dist.append(d)
-            pa_list.append(pa - a.radius * n)
-            pb_list.append(pb + b.radius * n)
-            normals.append(n)
-            owners.append((a.joint, b.joint))
+        travel: list[np.ndarray] = []  # per pair: how fast its distance can change per |Δq| [m/rad]
+        if self.self_pairs:
+            ends = np.array(segments)  # (B, 2, 3)
+            i_idx, j_idx = self._self_index
+            pa_all, pb_all = _closest_points(ends[i_idx, 0], ends[i_idx, 1], ends[j_idx, 0], ends[j_idx, 1])
+            delta = pa_all - pb_all
+            norm = np.linalg.norm(delta, axis=1)
+            d_all = norm - self._radius[i_idx] - self._radius[j_idx]
+            n_all = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+            for k in np.flatnonzero(d_all <= cutoff):
+                a, b = self.bodies[i_idx[k]], self.bodies[j_idx[k]]
+                names.append((a.name, b.name))
+                dist.append(float(d_all[k]))
+                pa_list.append(pa_all[k] - a.radius * n_all[k])
+                pb_list.append(pb_all[k] + b.radius * n_all[k])
+                normals.append(n_all[k])
+                owners.append((a.joint, b.joint))
+                travel.append(self._body_reach[i_idx[k]] + self._body_reach[j_idx[k]])
         body_transforms = None
         for item in self._attached_items():
             T = data.oMf[item.frame].homogeneous @ item.pose
@@ -226,10 +239,11 @@ class CollisionWorld:
                 pb_list.append(pb)
                 normals.append(n)
                 owners.append((b.joint, 0))
+                travel.append(self._body_reach[k])
         for att in self._attached_items():
             parent = self.model.frames[att.frame].parentJoint
             others = [
-                (item.name, item.geometry, item.transform, item.center, item.radius, 0, item.halfspace, item.pose)
+                (item.name, item.geometry, item.transform, item.center, item.radius, 0, item.halfspace, None)
                 for item in self._items
             ]
             if body_transforms is None:
@@ -240,8 +254,8 @@ class CollisionWorld:
                 geometry, transform = self._body_geometry_at(k, body_transforms)
                 center = (segments[k][0] + segments[k][1]) / 2
                 radius = b.radius + float(np.linalg.norm(segments[k][1] - segments[k][0])) / 2
-                others.append((b.name, geometry, transform, center, radius, b.joint, False, None))
-            for name, geometry, transform, center, radius, joint, halfspace, _ in others:
+                others.append((b.name, geometry, transform, center, radius, b.joint, False, self._body_reach[k]))
+            for name, geometry, transform, center, radius, joint, halfspace, row in others:
                 if not halfspace and np.linalg.norm(center - att.center) - radius - att.radius > cutoff:
                     continue
                 self._pair(geometry, transform, att.geometry, att.transform, name, att.name)
@@ -254,6 +268,7 @@ class CollisionWorld:
                 pb_list.append(pb)
                 normals.append(n)
                 owners.append((-(parent + 1), joint))  # negative: the attached object's parent joint
+                travel.append(att.reach if row is None else att.reach + row)
         count = len(names)
         P = np.zeros((count, 3))
         point_a = np.array(pa_list).reshape(count, 3) if count else P
@@ -268,18 +283,22 @@ class CollisionWorld:
                     J[k] += self._point_row(ja, point_a[k], normal[k])
                 if jb > 0:
                     J[k] -= self._point_row(jb, point_b[k], normal[k])
-        return Distances(tuple(names), np.asarray(dist, dtype=float), point_a, point_b, normal, J)
+        rows = np.array(travel).reshape(count, model.nv) if count else np.zeros((0, model.nv))
+        return Distances(tuple(names), np.asarray(dist, dtype=float), point_a, point_b, normal, J, rows)
 
     def _attached_items(self) -> list[_Item]:
         return getattr(self, "_attached", [])
 
-    def _body_transforms(self) -> list[np.ndarray]:
-        return [self.data.oMi[b.joint].homogeneous for b in self.bodies]
+    def _body_transforms(self) -> list[Any]:
+        """Each body's coal transform at the configuration held in ``self.data``."""
+        out = []
+        for b, (_, local) in zip(self.bodies, self._body_geometry, strict=True):
+            T = self.data.oMi[b.joint].homogeneous @ local
+            out.append(self._coal.Transform3s(T[:3, :3], T[:3, 3]))
+        return out
 
-    def _body_geometry_at(self, k: int, transforms: list[np.ndarray]) -> tuple[Any, Any]:
-        geometry, local = self._body_geometry[k]
-        T = transforms[k] @ local
-        return geometry, self._coal.Transform3s(T[:3, :3], T[:3, 3])
+    def _body_geometry_at(self, k: int, transforms: list[Any]) -> tuple[Any, Any]:
+        return self._body_geometry[k][0], transforms[k]
 
     def _pair(self, g1: Any, t1: Any, g2: Any, t2: Any, n1: str, n2: str) -> None:
         """coal distance between object 1 (b) and object 2 (a): stores (d, p_a, p_b, n from b to a)."""
@@ -335,6 +354,30 @@ def _segment_frame(start: np.ndarray, end: np.ndarray) -> np.ndarray:
         x /= np.linalg.norm(x)
         T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
     return T
+
+
+def _closest_points(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closest points of segment pairs [p0, p1], [q0, q1] (each (m, 3)), vectorised (zero-length segments too)."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a = np.einsum("ij,ij->i", d1, d1)
+    e = np.einsum("ij,ij->i", d2, d2)
+    f = np.einsum("ij,ij->i", d2, r)
+    c = np.einsum("ij,ij->i", d1, r)
+    b = np.einsum("ij,ij->i", d1, d2)
+    eps = 1e-12
+    safe_a, safe_e = np.maximum(a, eps), np.maximum(e, eps)
+    denom = a * e - b * b
+    s = np.where(denom > eps, np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
+    s = np.where(a <= eps, 0.0, s)
+    t = np.where(e <= eps, 0.0, (b * s + f) / safe_e)
+    low, high = t < 0.0, t > 1.0
+    s = np.where(low & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
+    s = np.where(high & (a > eps), np.clip((b - c) / safe_a, 0.0, 1.0), s)
+    t = np.clip(t, 0.0, 1.0)
+    # a point-like first segment: t from the projection of p0 on the second
+    t = np.where(a <= eps, np.where(e <= eps, 0.0, np.clip(f / safe_e, 0.0, 1.0)), t)
+    s = np.where((e <= eps) & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
+    return p0 + s[:, None] * d1, q0 + t[:, None] * d2
 
 
 def _segment_point_distance(s0: np.ndarray, s1: np.ndarray, p: np.ndarray) -> float:
