@@ -57,6 +57,7 @@ def rrt_connect(
     (indices), with every edge certified to keep ``margin / 2``; None when ``max_time`` [s] runs out."""
     rng = rng or np.random.default_rng(0)
     trees = (_Tree(start.copy()), _Tree(goal.copy()))
+    start_tree = trees[0]
     deadline = time.perf_counter() + max_time
 
     def steer(tree: _Tree, target: np.ndarray) -> tuple[int, bool]:
@@ -86,7 +87,7 @@ def rrt_connect(
                     first = a.path_to_root(new)[::-1]
                     second = b.path_to_root(other)
                     path = first + second[1:]
-                    return path if a is trees[0] else path[::-1]
+                    return path if a is start_tree else path[::-1]
         trees = (trees[1], trees[0])
     return None
 

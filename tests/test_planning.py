@@ -1,0 +1,154 @@
+"""taplan.planning: plans around a table, a box and a panel; certified clearance along the timed trajectory,
+limits, errors (start/goal in collision with mm, unreachable pose, NaN), and verification that rejects collisions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.errors import CollisionError, InvalidInputError, PlanningError
+from taplan.planning import check_segment, plan_motion, verify_trajectory
+from taplan.scene import Box, CollisionWorld, Scene
+from taplan.timing import jerk_limited, limit_usage
+
+CLEARANCE_TOL = 1e-3  # [m] the dense independent check may see 1 mm less than the certified floor... never below 0
+LIMIT_TOL = 1e-6  # relative
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _table_and_panel() -> Scene:
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.45], [0, 0, 0, 1]))
+    scene.add("panel", Box((0.5, 0.02, 0.45)), ([0.5, 0.0, -0.2], [0, 0, 0, 1]))
+    return scene
+
+
+def _dense_min_distance(world: CollisionWorld, trajectory: taplan.Trajectory, travel: float = 1e-3) -> float:
+    """Independent check: samples so that no link point moves more than ``travel`` [m] between them."""
+    t, lowest, previous = 0.0, np.inf, None
+    dt = 1e-3
+    while t <= trajectory.duration:
+        q = trajectory(t)
+        if previous is not None and world.max_point_speed_bound(previous, q) > travel:
+            t -= dt / 2
+            dt /= 2
+            continue
+        lowest = min(lowest, world.min_distance(q)[0])
+        previous, t, dt = q, t + dt, dt * 1.5
+    return min(lowest, world.min_distance(trajectory(trajectory.duration))[0])
+
+
+def _blocked_problem(robot: taplan.Robot, world: CollisionWorld) -> tuple[np.ndarray, np.ndarray]:
+    """A left-arm start and goal on either side of the panel, whose straight segment is blocked (seeded search)."""
+    rng = np.random.default_rng(3)
+    limits = robot.planning_limits
+    idx = robot.group("left").indices
+    for _ in range(2000):
+        a, b = robot.home.copy(), robot.home.copy()
+        a[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
+        b[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
+        free = world.min_distance(a)[0] > 0.015 and world.min_distance(b)[0] > 0.015  # home arms: 19 mm [m]
+        if free and not check_segment(world, a, b, 0.01).valid:
+            return a, b
+    raise AssertionError("no blocked problem found")
+
+
+def test_plan_around_obstacles_is_certified_and_within_limits(robot) -> None:
+    scene = _table_and_panel()
+    world = CollisionWorld(robot, scene)
+    start, goal = _blocked_problem(robot, world)
+    plan = plan_motion(robot, start, goal, world=world, seed=1)
+    report = plan.report
+    assert report.success and report.stage == "rrt-connect"
+    trajectory = plan.trajectory
+    np.testing.assert_allclose(trajectory(0.0), start, atol=1e-9)
+    np.testing.assert_allclose(trajectory(trajectory.duration), goal, atol=1e-9)
+    assert limit_usage(trajectory, robot.planning_limits).within(LIMIT_TOL, jerk=True)
+    assert report.min_clearance >= 0.01 / 4  # the certified floor [m]
+    assert _dense_min_distance(world, trajectory) > 0.0  # independent: no collision anywhere [m]
+    assert set(report.stage_times) == {"validate", "goal_ik", "path", "timing", "verify"}
+    assert report.path_length >= np.linalg.norm(goal - start) - 1e-9
+
+
+def test_pose_goal_reaches_the_pose_without_collision(robot) -> None:
+    scene = _table_and_panel()
+    world = CollisionWorld(robot, scene)
+    rng = np.random.default_rng(4)
+    right = robot.group("right").indices
+    for _ in range(200):  # a seeded collision-free goal configuration for the right arm
+        q_goal = robot.home.copy()
+        q_goal[right] += rng.uniform(-0.4, 0.4, 7)
+        q_goal = np.clip(q_goal, robot.planning_limits.lower, robot.planning_limits.upper)
+        if world.min_distance(q_goal)[0] > 0.015:
+            break
+    assert world.min_distance(q_goal)[0] > 0.015
+    target = robot.frame_pose(q_goal, "right_tcp")
+    plan = plan_motion(robot, robot.home, {"right_tcp": target}, world=world)
+    reached = robot.frame_pose(plan.trajectory(plan.trajectory.duration), "right_tcp")
+    assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) < 1e-3  # [m]
+    assert _dense_min_distance(world, plan.trajectory) > 0.0
+    left = robot.group("left").indices
+    np.testing.assert_allclose(plan.trajectory(plan.trajectory.duration)[left], robot.home[left], atol=1e-12)
+
+
+def test_start_and_goal_in_collision_name_the_pair_in_mm(robot) -> None:
+    q = robot.home
+    hand = robot.frame_pose(q, "left_ee")[:3, 3]
+    scene = Scene()
+    scene.add("block", Box((0.1, 0.1, 0.1)), (hand.tolist(), [0, 0, 0, 1]))
+    with pytest.raises(CollisionError, match=r"start: .* collides with block \(penetration \d+\.\d mm") as info:
+        plan_motion(robot, q, q + 0.1, scene)
+    assert info.value.argument == "start" and info.value.pair[1] == "block"
+    clear = Scene()
+    clear.add("block", Box((0.1, 0.1, 0.1)), ((hand + [0.0, 0.0, 0.5]).tolist(), [0, 0, 0, 1]))
+    goal = q.copy()
+    with pytest.raises(CollisionError, match="goal"):
+        far = Scene()
+        far.add("block", Box((0.1, 0.1, 0.1)), (hand.tolist(), [0, 0, 0, 1]))
+        start = q.copy()
+        start[robot.group("left").indices] += [0.0, 0.0, 0.0, -0.6, 0.0, 0.0, 0.0]
+        start = np.clip(start, robot.planning_limits.lower, robot.planning_limits.upper)
+        if CollisionWorld(robot, far).min_distance(start)[0] < 0.015:
+            pytest.skip("the moved start still touches the block")
+        plan_motion(robot, start, goal, far)
+
+
+def test_bad_inputs(robot) -> None:
+    q = robot.home
+    with pytest.raises(InvalidInputError, match="start"):
+        plan_motion(robot, np.full(robot.nq, np.nan), q)
+    with pytest.raises(InvalidInputError, match="goal"):
+        plan_motion(robot, q, q)
+    T = np.eye(4)
+    T[:3, 3] = [2.0, 0.0, 0.0]  # 2 m in front: out of reach
+    with pytest.raises(PlanningError, match="left_tcp.*unreachable"):
+        plan_motion(robot, q, {"left_tcp": T}, ik_seeds=1)
+    with pytest.raises(InvalidInputError, match="margin"):
+        plan_motion(robot, q, q + 0.05, margin=-1.0)
+
+
+def test_verification_rejects_a_trajectory_through_an_obstacle(robot) -> None:
+    scene = _table_and_panel()
+    world = CollisionWorld(robot, scene)
+    start, goal = _blocked_problem(robot, world)
+    straight = jerk_limited(np.array([start, goal]), robot.planning_limits).trajectory
+    verdict = verify_trajectory(world, straight, floor=0.0)
+    assert not verdict.collision_free
+    assert verdict.min_clearance < 1e-3
+    assert "panel" in verdict.pair or "table" in verdict.pair or verdict.pair[0] != ""
+
+
+def test_segment_check_certifies_half_the_margin(robot) -> None:
+    world = CollisionWorld(robot, _table_and_panel())
+    a = robot.home.copy()
+    b = a.copy()
+    b[robot.group("right").indices] += 0.3
+    check = check_segment(world, a, b, 0.01)
+    assert check.valid
+    for s in np.linspace(0, 1, 101):  # the certificate holds between its evaluations too
+        assert world.min_distance(a + s * (b - a))[0] >= 0.005 - CLEARANCE_TOL
