@@ -16,12 +16,15 @@ from taplan.ik._kinematics import Kinematics
 from taplan.ik._targets import as_transform
 from taplan.ik.limits import AccelerationLimit, CollisionLimit, PositionLimit, TargetBraking, VelocityLimit
 from taplan.ik.limits.limit import BoxLimit, RowLimit
+from taplan.ik.limits.scene_limit import SceneLimit
 from taplan.ik.problem import Problem, ProblemBuilder, project
 from taplan.ik.solvers import QPSolver, get_solver
 from taplan.ik.tasks import FrameTask, PostureTask
 from taplan.ik.tasks.task import Task
 from taplan.limits import JointLimits
 from taplan.robot import Robot
+from taplan.scene.scene import Scene
+from taplan.scene.world import CollisionWorld
 
 __all__ = ["DifferentialIK", "IKStep"]
 
@@ -87,6 +90,9 @@ class DifferentialIK:
         posture: Posture reference [rad] (nq,); default: the configuration given to ``reset``.
         extra_tasks: More tasks (e.g. a :class:`~taplan.ik.tasks.RelativeFrameTask`).
         extra_limits: More limits.
+        scene: Obstacles to keep ``collision_margin`` away from (a :class:`~taplan.scene.Scene` or a ready
+            :class:`~taplan.scene.CollisionWorld`): adds a :class:`~taplan.ik.limits.SceneLimit` (robot bodies vs
+            obstacles and attached objects, the arms vs the torso, chest and head; the generic builder is used).
         fused: Build the default configuration's QP with the fused builder (:mod:`taplan.ik._fused`); False, or any
             extra task or limit, uses the generic :class:`~taplan.ik.problem.ProblemBuilder` (same problem, slower).
         native: With the fused builder, compute each problem with a kernel compiled from CasADi-generated C (once
@@ -114,6 +120,7 @@ class DifferentialIK:
         posture: npt.ArrayLike | None = None,
         extra_tasks: Sequence[Task] = (),
         extra_limits: Sequence[BoxLimit | RowLimit] = (),
+        scene: Scene | CollisionWorld | None = None,
         fused: bool = True,
         native: bool = True,
     ) -> None:
@@ -153,6 +160,11 @@ class DifferentialIK:
                     pairs, robot.model, collision_margin, collision_influence, acceleration=acc
                 )
                 box.append(self.collision)
+        self.scene_limit: SceneLimit | None = None
+        if scene is not None:
+            world = scene if isinstance(scene, CollisionWorld) else CollisionWorld(robot, scene)
+            self.scene_limit = SceneLimit(world, collision_margin, collision_influence, acceleration=acc)
+            extra_limits = [*extra_limits, self.scene_limit]
         tasks: list[Task] = [*self.tasks.values(), self.posture_task, *extra_tasks]
         self.builder: ProblemBuilder | FusedBuilder
         if fused and not extra_tasks and not extra_limits:
@@ -206,6 +218,8 @@ class DifferentialIK:
         self.posture_task.set_target(q if self._posture is None else self._posture)
         if self.collision is not None:
             self.collision.reset()
+        if self.scene_limit is not None:
+            self.scene_limit.reset()
         self._initialised = True
 
     def set_posture(self, q: npt.ArrayLike) -> None:
