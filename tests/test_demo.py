@@ -20,7 +20,7 @@ def demo(tmp_path_factory):
 
 
 def test_every_plan_passes_every_reference_controller(demo):
-    assert [p.name for p in demo.plans] == ["reach", "line", "pick"]
+    assert [p.name for p in demo.plans] == ["reach", "line", "pick", "scene"]
     for plan in demo.plans:
         for label, report in plan.reports.items():
             assert report.passed, (plan.name, label, report.failures)
@@ -66,7 +66,7 @@ def test_outputs_are_written(demo):
     names = {p.name for p in demo.files}
     assert {"reach_100hz.csv", "line_100hz.csv", "pick_100hz.csv", "report.json"} <= names
     report = json.loads((demo.out_dir / "report.json").read_text())
-    assert set(report["plans"]) == {"reach", "line", "pick"}
+    assert set(report["plans"]) == {"reach", "line", "pick", "scene"}
     reloaded = taplan.Trajectory.load(demo.out_dir / "pick_100hz.csv")
     np.testing.assert_allclose(reloaded.positions[-1], demo.plans[2].trajectory.positions[-1], atol=1e-9)
 
@@ -76,3 +76,19 @@ def test_cli_demo_exit_code_and_report(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "guide: linear @50 Hz" in out and "PASS" in out
     assert (tmp_path / "out" / "report.json").exists()
+
+
+def test_scene_plan_is_collision_free_and_reaches_across_the_box(demo):
+    from taplan.demo import SCENE_FILE, SCENE_REACH_RIGHT
+    from taplan.planning import check_segment, verify_trajectory
+    from taplan.scene import CollisionWorld, load_scene
+
+    robot = taplan.Robot.teleavatar()
+    world = CollisionWorld(robot, load_scene(SCENE_FILE))
+    plan = next(p for p in demo.plans if p.name == "scene")
+    assert verify_trajectory(world, plan.trajectory, floor=0.0, hold=robot.home).collision_free
+    goal = robot.home.copy()
+    goal[7:] = SCENE_REACH_RIGHT
+    assert not check_segment(world, robot.home, goal, 0.01).valid  # the straight motion would collide
+    end = robot.frame_pose(plan.trajectory(plan.trajectory.duration), "right_tcp")[:3, 3]
+    np.testing.assert_allclose(end, robot.frame_pose(goal, "right_tcp")[:3, 3], atol=POSE_TOL)
