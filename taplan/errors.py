@@ -101,7 +101,9 @@ class CollisionError(TaplanError):
     Attributes:
         argument: What was checked (``"start"``, ``"goal"``, ...).
         pair: The colliding bodies ``(robot body, other body or obstacle)``.
-        depth: Penetration depth [m] (>= 0), or how far inside the required clearance.
+        depth: Penetration depth [m] (> 0), or minus the distance when the bodies are apart but closer than
+            ``clearance``.
+        clearance: The clearance that was required [m].
     """
 
     def __init__(self, argument: str, pair: tuple[str, str], depth: float, detail: str = "") -> None:

@@ -330,8 +330,7 @@ class CollisionWorld:
         m = self.margin if margin is None else float(margin)
         d, pair = self.distances(self._configuration(q, argument), cutoff=m, jacobian=False).closest()
         if d < m:
-            extra = f" ({m * 1e3:.1f} mm clearance required)" if m > 0 else ""
-            raise CollisionError(argument, pair, m - d if m > 0 else -d, extra)
+            raise CollisionError(argument, pair, -d, m)
 
     def max_point_speed_bound(self, q_a: npt.ArrayLike, q_b: npt.ArrayLike) -> float:
         """An upper bound [m] on how far any point of the robot's bodies (and attached objects) moves between two
