@@ -44,7 +44,7 @@ READY_POSE = np.concatenate([0.0 - _READY_RIGHT, _READY_RIGHT])
 
 # The scene plan's goal: the right arm reaching across the box (its right_tcp pose is the target) [rad]
 SCENE_REACH_RIGHT = np.array([-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403])
-SCENE_FILE = Path(__file__).resolve().parent / "models" / "teleavatar" / "scenes" / "table.yaml"
+SCENE_FILE = Path(__file__).resolve().parent / "models" / "teleavatar" / "scenes" / "table.yaml"  # TELEAVATAR_SCENES
 
 COMMAND_RATE = 100.0  # [Hz]: taplan streams at the arm's loop rate (the vendor's own zero.py does too)
 GUIDE_RATE = 50.0  # [Hz]: the guide's demos publish at 50 Hz

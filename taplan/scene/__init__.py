@@ -8,7 +8,7 @@ against the robot (:mod:`~taplan.scene.robot_bodies`: its capsules and allowed p
 
 from __future__ import annotations
 
-from taplan.scene.io import load_scene, save_scene, scene_from_dict, scene_to_dict
+from taplan.scene.io import TELEAVATAR_SCENES, load_scene, save_scene, scene_from_dict, scene_to_dict
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import AttachedObject, Obstacle, Scene, as_pose
 from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Mesh, Shape, Sphere
@@ -27,6 +27,7 @@ __all__ = [
     "AttachedObject",
     "as_pose",
     "load_scene",
+    "TELEAVATAR_SCENES",
     "save_scene",
     "scene_from_dict",
     "scene_to_dict",

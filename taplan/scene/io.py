@@ -30,7 +30,9 @@ from taplan.errors import InvalidInputError
 from taplan.scene.scene import Scene
 from taplan.scene.shapes import shape_from_dict
 
-__all__ = ["load_scene", "save_scene", "scene_from_dict", "scene_to_dict"]
+__all__ = ["load_scene", "save_scene", "scene_from_dict", "scene_to_dict", "TELEAVATAR_SCENES"]
+
+TELEAVATAR_SCENES = Path(__file__).resolve().parents[1] / "models" / "teleavatar" / "scenes"  # bundled examples
 
 _TOP = {"frame", "obstacles", "attached"}
 
