@@ -47,6 +47,16 @@ def capsule_pair_distance(
     return norm - first.radius - second.radius, grad, pa, pb
 
 
+def check_damper(margin: float, influence: float, gain: float) -> None:
+    """Validate a velocity damper's margin [m], influence distance [m] (> margin) and gain in (0, 1]."""
+    if not (np.isfinite(margin) and margin >= 0.0):
+        raise InvalidInputError("margin", margin, "a distance >= 0 [m]")
+    if not (np.isfinite(influence) and influence > margin):
+        raise InvalidInputError("influence", influence, f"a distance > margin ({margin}) [m]")
+    if not (np.isfinite(gain) and 0.0 < gain <= 1.0):
+        raise InvalidInputError("gain", gain, "a number in (0, 1]")
+
+
 class CollisionLimit(RowLimit):
     r"""Keep every capsule pair at least ``margin`` apart.
 
@@ -93,12 +103,7 @@ class CollisionLimit(RowLimit):
         acceleration: np.ndarray | None = None,
         buffer: float = 1e-3,
     ) -> None:
-        if not (np.isfinite(margin) and margin >= 0.0):
-            raise InvalidInputError("margin", margin, "a distance >= 0 [m]")
-        if not (np.isfinite(influence) and influence > margin):
-            raise InvalidInputError("influence", influence, f"a distance > margin ({margin}) [m]")
-        if not (np.isfinite(gain) and 0.0 < gain <= 1.0):
-            raise InvalidInputError("gain", gain, "a number in (0, 1]")
+        check_damper(margin, influence, gain)
         self.pairs = list(pairs)
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
         self.buffer = float(buffer)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from taplan.errors import InvalidInputError
+from taplan.ik.limits.collision_limit import check_damper
 from taplan.ik.limits.limit import RowLimit, StepContext
 from taplan.scene.world import CollisionWorld
 
@@ -54,12 +54,7 @@ class SceneLimit(RowLimit):
         acceleration: np.ndarray | None = None,
         arm_pairs: bool = False,
     ) -> None:
-        if not (np.isfinite(margin) and margin >= 0.0):
-            raise InvalidInputError("margin", margin, "a distance >= 0 [m]")
-        if not (np.isfinite(influence) and influence > margin):
-            raise InvalidInputError("influence", influence, f"a distance > margin ({margin}) [m]")
-        if not (np.isfinite(gain) and 0.0 < gain <= 1.0):
-            raise InvalidInputError("gain", gain, "a number in (0, 1]")
+        check_damper(margin, influence, gain)
         self.world = world
         self.margin, self.influence, self.gain = float(margin), float(influence), float(gain)
         self.acceleration = None if acceleration is None else np.asarray(acceleration, dtype=float)
