@@ -24,6 +24,7 @@ __all__ = ["SegmentCheck", "check_segment", "verify_trajectory", "Verification"]
 
 MIN_CERTIFIED = 1e-4  # [m] below this clearance a step would be too small to certify: report a failure
 LOOKAHEAD = 0.1  # [s] window over which the peak joint speeds bound a trajectory step
+BOUND_BEYOND = 0.1  # [m] pairs whose bounding spheres are farther apart use that gap (a lower bound): no coal query
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ def check_segment(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margi
     floor = margin / 2
     while True:
         q = q_a + s * (q_b - q_a)
-        distances = world.distances(q, jacobian=False)
+        distances = world.distances(q, jacobian=False, bound_beyond=BOUND_BEYOND)
         d, pair = distances.closest()
         evaluations += 1
         if d < lowest:
@@ -107,7 +108,7 @@ def verify_trajectory(
     while True:
         q = base.copy()
         q[index] = trajectory(t)
-        distances = world.distances(q, jacobian=False)
+        distances = world.distances(q, jacobian=False, bound_beyond=BOUND_BEYOND)
         d, p = distances.closest()
         evaluations += 1
         if d < lowest:

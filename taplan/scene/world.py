@@ -172,8 +172,15 @@ class CollisionWorld:
         return self.robot.check_configuration(q, name)
 
     # -------------------------------------------------------------------------------------------------- API
-    def distances(self, q: npt.ArrayLike, *, cutoff: float = math.inf, jacobian: bool = True) -> Distances:
-        """Every active pair whose distance may be <= ``cutoff`` [m] (exact distances; broad phase by spheres)."""
+    def distances(
+        self, q: npt.ArrayLike, *, cutoff: float = math.inf, jacobian: bool = True, bound_beyond: float = math.inf
+    ) -> Distances:
+        """Every active pair whose distance may be <= ``cutoff`` [m] (broad phase by bounding spheres).
+
+        Distances are exact, except robot-obstacle pairs whose bounding spheres are farther apart than
+        ``bound_beyond`` [m]: those report that gap, a lower bound of their distance (enough for certificates,
+        which only need lower bounds, and much cheaper than a coal query).
+        """
         q = self._configuration(q)
         self._refresh()
         model, data = self.model, self.data
@@ -218,21 +225,30 @@ class CollisionWorld:
         movers = [(k, b, segments[k]) for k, b in enumerate(self.bodies) if b.joint != 0]
         for item in self._items:
             for k, b, (s0, s1) in movers:
-                if (
-                    not item.halfspace
-                    and _segment_point_distance(s0, s1, item.center) - b.radius - item.radius > cutoff
-                ):
-                    continue
-                if item.halfspace and _halfspace_gap(item.pose, s0, s1) - b.radius > cutoff:
-                    continue
-                if body_transforms is None:
-                    body_transforms = self._body_transforms()
-                self._pair(
-                    item.geometry, item.transform, *self._body_geometry_at(k, body_transforms), item.name, b.name
-                )
-                d, pa, pb, n = self._last
-                if d > cutoff:
-                    continue
+                if item.halfspace:  # a capsule against a plane: exact in closed form
+                    gap, lowest = _halfspace_gap(item.pose, s0, s1)
+                    d = gap - b.radius
+                    if d > cutoff:
+                        continue
+                    n = item.pose[:3, 2].copy()
+                    pa = lowest - b.radius * n
+                    pb = lowest - gap * n
+                else:
+                    bound = _segment_point_distance(s0, s1, item.center) - b.radius - item.radius
+                    if bound > cutoff:
+                        continue
+                    if bound > bound_beyond:  # far: the bounding spheres' gap is a valid lower bound
+                        d, pa, pb = bound, (s0 + s1) / 2, item.center
+                        n = pa - pb
+                        n = n / max(float(np.linalg.norm(n)), 1e-12)
+                    else:
+                        if body_transforms is None:
+                            body_transforms = self._body_transforms()
+                        geometry, transform = self._body_geometry_at(k, body_transforms)
+                        self._pair(item.geometry, item.transform, geometry, transform, item.name, b.name)
+                        d, pa, pb, n = self._last
+                        if d > cutoff:
+                            continue
                 names.append((b.name, item.name))
                 dist.append(d)
                 pa_list.append(pa)
@@ -386,8 +402,9 @@ def _segment_point_distance(s0: np.ndarray, s1: np.ndarray, p: np.ndarray) -> fl
     return float(np.linalg.norm(s0 + t * d - p))
 
 
-def _halfspace_gap(pose: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> float:
-    """Smallest height [m] of the segment's ends above the half-space's plane."""
+def _halfspace_gap(pose: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> tuple[float, np.ndarray]:
+    """Smallest height [m] of the segment above the half-space's plane, and the segment end that has it."""
     n = pose[:3, 2]
     o = pose[:3, 3]
-    return float(min(n @ (s0 - o), n @ (s1 - o)))
+    h0, h1 = float(n @ (s0 - o)), float(n @ (s1 - o))
+    return (h0, s0) if h0 <= h1 else (h1, s1)
