@@ -66,6 +66,46 @@ class Distances:
         return float(self.distance[k]), self.pairs[k]
 
 
+@dataclass(frozen=True)
+class _Pairs:
+    """Pairs of one kind, before they are joined: names, distances, witness points, normals, the joints carrying
+    each member (0: fixed) and the travel rows."""
+
+    names: list[tuple[str, str]]
+    distance: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    normal: np.ndarray
+    owner_a: np.ndarray
+    owner_b: np.ndarray
+    travel: np.ndarray
+
+
+class _PairList:
+    """Pairs found one at a time (coal queries of attached objects)."""
+
+    def __init__(self, nv: int) -> None:
+        self.nv = nv
+        self.rows: list[tuple] = []
+
+    def add(self, name: tuple[str, str], d: float, pa: Any, pb: Any, n: Any, a: int, b: int, travel: Any) -> None:
+        self.rows.append((name, d, pa, pb, n, a, b, travel))
+
+    def freeze(self) -> _Pairs:
+        count = len(self.rows)
+        column = list(zip(*self.rows, strict=True)) if count else [[] for _ in range(8)]
+        return _Pairs(
+            list(column[0]),
+            np.array(column[1], dtype=float),
+            np.array(column[2], dtype=float).reshape(count, 3),
+            np.array(column[3], dtype=float).reshape(count, 3),
+            np.array(column[4], dtype=float).reshape(count, 3),
+            np.array(column[5], dtype=int),
+            np.array(column[6], dtype=int),
+            np.array(column[7], dtype=float).reshape(count, self.nv),
+        )
+
+
 class _Item:
     """An obstacle or attached object with its coal geometry and bounding sphere."""
 
@@ -116,6 +156,12 @@ class CollisionWorld:
             np.array([j for _, j in self.self_pairs], dtype=int),
         )
         self._radius = np.array([b.radius for b in self.bodies])
+        self._body_joint = np.array([b.joint for b in self.bodies], dtype=int)
+        self._body_start = np.array([b.start for b in self.bodies], dtype=float).reshape(-1, 3)
+        self._body_end = np.array([b.end for b in self.bodies], dtype=float).reshape(-1, 3)
+        self._self_names = [(self.bodies[i].name, self.bodies[j].name) for i, j in self.self_pairs]
+        # bodies fixed to the root never move relative to an obstacle: a plan cannot change those distances
+        self._movers = np.array([k for k, b in enumerate(self.bodies) if b.joint != 0], dtype=int)
         self._body_geometry = []
         for b in self.bodies:
             length = float(np.linalg.norm(b.end - b.start))
@@ -155,6 +201,13 @@ class CollisionWorld:
         if self.scene.version == self._version:
             return
         self._items = [_Item(o.name, o.shape, o.pose) for o in self.scene.obstacles.values()]
+        self._item_center = np.array([item.pose[:3, 3] for item in self._items]).reshape(-1, 3)
+        self._item_normal = np.array([item.pose[:3, 2] for item in self._items]).reshape(-1, 3)
+        self._item_radius = np.array([item.radius for item in self._items])
+        self._half_index = np.array([k for k, item in enumerate(self._items) if item.halfspace], dtype=int)
+        self._solid_index = np.array([k for k, item in enumerate(self._items) if not item.halfspace], dtype=int)
+        for item in self._items:
+            item.center = item.pose[:3, 3]
         self._attached = []
         for a in self.scene.attached.values():
             frame = self.robot.frame_id(a.frame)
@@ -189,135 +242,186 @@ class CollisionWorld:
         else:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
-        segments = [(data.oMi[b.joint].act(b.start), data.oMi[b.joint].act(b.end)) for b in self.bodies]
-        names: list[tuple[str, str]] = []
-        dist: list[float] = []
-        pa_list: list[np.ndarray] = []
-        pb_list: list[np.ndarray] = []
-        normals: list[np.ndarray] = []
-        owners: list[tuple[int, int]] = []  # (joint of a, joint of b) for the Jacobian; -1: fixed
-        travel: list[np.ndarray] = []  # per pair: how fast its distance can change per |Δq| [m/rad]
+        rotation = np.array([data.oMi[j].rotation for j in self._body_joint.tolist()])  # (B, 3, 3)
+        origin = np.array([data.oMi[j].translation for j in self._body_joint.tolist()])  # (B, 3)
+        starts = np.einsum("bij,bj->bi", rotation, self._body_start) + origin
+        ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
+        parts: list[_Pairs] = []
         if self.self_pairs:
-            ends = np.array(segments)  # (B, 2, 3)
-            i_idx, j_idx = self._self_index
-            pa_all, pb_all = _closest_points(ends[i_idx, 0], ends[i_idx, 1], ends[j_idx, 0], ends[j_idx, 1])
-            delta = pa_all - pb_all
-            norm = np.linalg.norm(delta, axis=1)
-            d_all = norm - self._radius[i_idx] - self._radius[j_idx]
-            n_all = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
-            for k in np.flatnonzero(d_all <= cutoff):
-                a, b = self.bodies[i_idx[k]], self.bodies[j_idx[k]]
-                names.append((a.name, b.name))
-                dist.append(float(d_all[k]))
-                pa_list.append(pa_all[k] - a.radius * n_all[k])
-                pb_list.append(pb_all[k] + b.radius * n_all[k])
-                normals.append(n_all[k])
-                owners.append((a.joint, b.joint))
-                travel.append(self._body_reach[i_idx[k]] + self._body_reach[j_idx[k]])
-        body_transforms = None
-        for item in self._attached_items():
-            T = data.oMf[item.frame].homogeneous @ item.pose
-            item.transform = self._coal.Transform3s(T[:3, :3], T[:3, 3])
-            item.center = T[:3, 3]
-        for item in self._items:
-            item.center = item.pose[:3, 3]
-        # bodies fixed to the root never move relative to an obstacle: a plan cannot change those distances
-        movers = [(k, b, segments[k]) for k, b in enumerate(self.bodies) if b.joint != 0]
-        for item in self._items:
-            for k, b, (s0, s1) in movers:
-                if item.halfspace:  # a capsule against a plane: exact in closed form
-                    gap, lowest = _halfspace_gap(item.pose, s0, s1)
-                    d = gap - b.radius
-                    if d > cutoff:
-                        continue
-                    n = item.pose[:3, 2].copy()
-                    pa = lowest - b.radius * n
-                    pb = lowest - gap * n
-                else:
-                    bound = _segment_point_distance(s0, s1, item.center) - b.radius - item.radius
-                    if bound > cutoff:
-                        continue
-                    if bound > bound_beyond:  # far: the bounding spheres' gap is a valid lower bound
-                        d, pa, pb = bound, (s0 + s1) / 2, item.center
-                        n = pa - pb
-                        n = n / max(float(np.linalg.norm(n)), 1e-12)
-                    else:
-                        if body_transforms is None:
-                            body_transforms = self._body_transforms()
-                        geometry, transform = self._body_geometry_at(k, body_transforms)
-                        self._pair(item.geometry, item.transform, geometry, transform, item.name, b.name)
-                        d, pa, pb, n = self._last
-                        if d > cutoff:
-                            continue
-                names.append((b.name, item.name))
-                dist.append(d)
-                pa_list.append(pa)
-                pb_list.append(pb)
-                normals.append(n)
-                owners.append((b.joint, 0))
-                travel.append(self._body_reach[k])
+            parts.append(self._self_distances(starts, ends, cutoff))
+        if self._items:
+            parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
+        if self._attached_items():
+            parts.append(self._attached_distances(starts, ends, cutoff))
+        names = tuple(name for part in parts for name in part.names)
+        count = len(names)
+        if count:
+            distance = np.concatenate([p.distance for p in parts])
+            point_a = np.concatenate([p.point_a for p in parts])
+            point_b = np.concatenate([p.point_b for p in parts])
+            normal = np.concatenate([p.normal for p in parts])
+            owner_a = np.concatenate([p.owner_a for p in parts])
+            owner_b = np.concatenate([p.owner_b for p in parts])
+            travel = np.concatenate([p.travel for p in parts])
+        else:
+            distance, owner_a, owner_b = np.zeros(0), np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+            point_a, point_b, normal = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+            travel = np.zeros((0, model.nv))
+        J = self._jacobian_rows(owner_a, owner_b, point_a, point_b, normal) if jacobian else None
+        return Distances(names, distance, point_a, point_b, normal, J, travel)
+
+    def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> _Pairs:
+        """Robot body pairs (capsules) in closed form."""
+        i_idx, j_idx = self._self_index
+        pa, pb = _closest_points(starts[i_idx], ends[i_idx], starts[j_idx], ends[j_idx])
+        delta = pa - pb
+        norm = np.linalg.norm(delta, axis=1)
+        d = norm - self._radius[i_idx] - self._radius[j_idx]
+        n = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+        keep = np.flatnonzero(d <= cutoff)
+        i, j = i_idx[keep], j_idx[keep]
+        n = n[keep]
+        return _Pairs(
+            [self._self_names[k] for k in keep],
+            d[keep],
+            pa[keep] - self._radius[i][:, None] * n,
+            pb[keep] + self._radius[j][:, None] * n,
+            n,
+            self._body_joint[i],
+            self._body_joint[j],
+            self._body_reach[i] + self._body_reach[j],
+        )
+
+    def _obstacle_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float) -> _Pairs:
+        """Moving robot bodies vs static obstacles: half-spaces in closed form, others bounded by their bounding
+        spheres and queried with coal when that bound is within ``bound_beyond``. Item-major order."""
+        movers = self._movers
+        s0, s1 = starts[movers], ends[movers]  # (Bm, 3)
+        radius = self._radius[movers]
+        items = self._items
+        M, Bm = len(items), len(movers)
+        d = np.empty((M, Bm))
+        pa = np.empty((M, Bm, 3))
+        pb = np.empty((M, Bm, 3))
+        n = np.empty((M, Bm, 3))
+        exact = np.zeros((M, Bm), dtype=bool)
+        half = self._half_index
+        if half.size:
+            normal = self._item_normal[half]  # (H, 3)
+            h0 = np.einsum("hk,bk->hb", normal, s0) - np.einsum("hk,hk->h", normal, self._item_center[half])[:, None]
+            h1 = h0 + np.einsum("hk,bk->hb", normal, s1 - s0)
+            low = np.where((h0 <= h1)[:, :, None], s0[None], s1[None])
+            gap = np.minimum(h0, h1)
+            d[half] = gap - radius[None]
+            n[half] = normal[:, None, :]
+            pa[half] = low - radius[None, :, None] * normal[:, None, :]
+            pb[half] = low - gap[:, :, None] * normal[:, None, :]
+            exact[half] = True
+        solid = self._solid_index
+        transforms: dict[int, Any] = {}
+        if solid.size:
+            center = self._item_center[solid]  # (S, 3)
+            axis = s1 - s0
+            length2 = np.einsum("bk,bk->b", axis, axis)
+            t = np.einsum("sbk,bk->sb", center[:, None, :] - s0[None], axis) / np.maximum(length2, 1e-18)
+            t = np.clip(np.where(length2 < 1e-18, 0.0, t), 0.0, 1.0)
+            nearest = s0[None] + t[:, :, None] * axis[None]
+            gap = (
+                np.linalg.norm(nearest - center[:, None, :], axis=2) - radius[None] - self._item_radius[solid][:, None]
+            )
+            d[solid] = gap
+            mid = (s0 + s1) / 2
+            away = mid[None] - center[:, None, :]
+            pa[solid] = mid[None]
+            pb[solid] = np.broadcast_to(center[:, None, :], away.shape)
+            n[solid] = away / np.maximum(np.linalg.norm(away, axis=2), 1e-12)[:, :, None]
+            for s_row, b_col in zip(*np.nonzero((gap <= cutoff) & (gap <= bound_beyond)), strict=True):
+                item, body = items[solid[s_row]], int(movers[b_col])
+                if body not in transforms:
+                    transforms[body] = self._body_transform(body)
+                geometry, transform = self._body_geometry[body][0], transforms[body]
+                d_k, pa_k, pb_k, n_k = self._pair(item.geometry, item.transform, geometry, transform)
+                m = solid[s_row]
+                d[m, b_col], pa[m, b_col], pb[m, b_col], n[m, b_col] = d_k, pa_k, pb_k, n_k
+        rows, cols = np.nonzero(d <= cutoff)
+        names = [(self.bodies[movers[c]].name, items[r].name) for r, c in zip(rows, cols, strict=True)]
+        body = movers[cols]
+        part = _Pairs(
+            names,
+            d[rows, cols],
+            pa[rows, cols],
+            pb[rows, cols],
+            n[rows, cols],
+            self._body_joint[body],
+            np.zeros(len(rows), dtype=int),
+            self._body_reach[body],
+        )
+        return part
+
+    def _attached_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> _Pairs:
+        """Attached objects vs obstacles and vs the robot bodies they may not touch (coal)."""
+        data = self.data
+        for att in self._attached_items():
+            T = data.oMf[att.frame].homogeneous @ att.pose
+            att.transform = self._coal.Transform3s(T[:3, :3], T[:3, 3])
+            att.center = T[:3, 3]
+        transforms = self._body_transforms()
+        out = _PairList(self.model.nv)
         for att in self._attached_items():
             parent = self.model.frames[att.frame].parentJoint
             others = [
                 (item.name, item.geometry, item.transform, item.center, item.radius, 0, item.halfspace, None)
                 for item in self._items
             ]
-            if body_transforms is None:
-                body_transforms = self._body_transforms()
             for k, b in enumerate(self.bodies):
                 if b.name in att.touch:
                     continue
-                geometry, transform = self._body_geometry_at(k, body_transforms)
-                center = (segments[k][0] + segments[k][1]) / 2
-                radius = b.radius + float(np.linalg.norm(segments[k][1] - segments[k][0])) / 2
-                others.append((b.name, geometry, transform, center, radius, b.joint, False, self._body_reach[k]))
+                center = (starts[k] + ends[k]) / 2
+                radius = b.radius + float(np.linalg.norm(ends[k] - starts[k])) / 2
+                geometry = self._body_geometry[k][0]
+                others.append((b.name, geometry, transforms[k], center, radius, b.joint, False, self._body_reach[k]))
             for name, geometry, transform, center, radius, joint, halfspace, row in others:
                 if not halfspace and np.linalg.norm(center - att.center) - radius - att.radius > cutoff:
                     continue
-                self._pair(geometry, transform, att.geometry, att.transform, name, att.name)
-                d, pa, pb, n = self._last
+                d, pa, pb, n = self._pair(geometry, transform, att.geometry, att.transform)
                 if d > cutoff:
                     continue
-                names.append((att.name, name))
-                dist.append(d)
-                pa_list.append(pa)
-                pb_list.append(pb)
-                normals.append(n)
-                owners.append((-(parent + 1), joint))  # negative: the attached object's parent joint
-                travel.append(att.reach if row is None else att.reach + row)
-        count = len(names)
-        P = np.zeros((count, 3))
-        point_a = np.array(pa_list).reshape(count, 3) if count else P
-        point_b = np.array(pb_list).reshape(count, 3) if count else P.copy()
-        normal = np.array(normals).reshape(count, 3) if count else P.copy()
-        J = None
-        if jacobian:
-            J = np.zeros((count, model.nv))
-            for k, (ja, jb) in enumerate(owners):
-                ja = -ja - 1 if ja < 0 else ja
-                if ja > 0:
-                    J[k] += self._point_row(ja, point_a[k], normal[k])
-                if jb > 0:
-                    J[k] -= self._point_row(jb, point_b[k], normal[k])
-        rows = np.array(travel).reshape(count, model.nv) if count else np.zeros((0, model.nv))
-        return Distances(tuple(names), np.asarray(dist, dtype=float), point_a, point_b, normal, J, rows)
+                out.add((att.name, name), d, pa, pb, n, parent, joint, att.reach if row is None else att.reach + row)
+        return out.freeze()
+
+    def _jacobian_rows(
+        self, owner_a: np.ndarray, owner_b: np.ndarray, point_a: np.ndarray, point_b: np.ndarray, normal: np.ndarray
+    ) -> np.ndarray:
+        """``n · (J_a(p_a) − J_b(p_b))`` per pair, with one pinocchio joint Jacobian per distinct joint."""
+        model, data = self.model, self.data
+        rows = np.zeros((len(owner_a), model.nv))
+        for owner, point, sign in ((owner_a, point_a, 1.0), (owner_b, point_b, -1.0)):
+            for joint in np.unique(owner):
+                if joint <= 0:
+                    continue
+                mask = owner == joint
+                J = pin.getJointJacobian(model, data, int(joint), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                r = point[mask] - data.oMi[int(joint)].translation
+                n = normal[mask]
+                rows[mask] += sign * (n @ J[:3] + np.cross(r, n) @ J[3:])
+        return rows
 
     def _attached_items(self) -> list[_Item]:
         return getattr(self, "_attached", [])
 
     def _body_transforms(self) -> list[Any]:
         """Each body's coal transform at the configuration held in ``self.data``."""
-        out = []
-        for b, (_, local) in zip(self.bodies, self._body_geometry, strict=True):
-            T = self.data.oMi[b.joint].homogeneous @ local
-            out.append(self._coal.Transform3s(T[:3, :3], T[:3, 3]))
-        return out
+        return [self._body_transform(k) for k in range(len(self.bodies))]
+
+    def _body_transform(self, k: int) -> Any:
+        T = self.data.oMi[self.bodies[k].joint].homogeneous @ self._body_geometry[k][1]
+        return self._coal.Transform3s(T[:3, :3], T[:3, 3])
 
     def _body_geometry_at(self, k: int, transforms: list[Any]) -> tuple[Any, Any]:
         return self._body_geometry[k][0], transforms[k]
 
-    def _pair(self, g1: Any, t1: Any, g2: Any, t2: Any, n1: str, n2: str) -> None:
-        """coal distance between object 1 (b) and object 2 (a): stores (d, p_a, p_b, n from b to a)."""
+    def _pair(self, g1: Any, t1: Any, g2: Any, t2: Any) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """coal distance between object 1 (b) and object 2 (a): (d, p_a, p_b, n from b to a)."""
         result = self._coal.DistanceResult()
         d = float(self._coal.distance(g1, t1, g2, t2, self._request, result))
         pb = np.array(result.getNearestPoint1())
@@ -325,12 +429,7 @@ class CollisionWorld:
         n = np.array(result.normal, dtype=float)
         norm = float(np.linalg.norm(n))
         n = n / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-        self._last = (d, pa, pb, n)
-
-    def _point_row(self, joint: int, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
-        J = pin.getJointJacobian(self.model, self.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-        r = point - self.data.oMi[joint].translation
-        return normal @ J[:3] + np.cross(r, normal) @ J[3:]
+        return d, pa, pb, n
 
     def min_distance(self, q: npt.ArrayLike) -> tuple[float, tuple[str, str]]:
         """The smallest signed distance [m] over the active pairs, and its pair."""
@@ -393,18 +492,3 @@ def _closest_points(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarr
     t = np.where(a <= eps, np.where(e <= eps, 0.0, np.clip(f / safe_e, 0.0, 1.0)), t)
     s = np.where((e <= eps) & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
     return p0 + s[:, None] * d1, q0 + t[:, None] * d2
-
-
-def _segment_point_distance(s0: np.ndarray, s1: np.ndarray, p: np.ndarray) -> float:
-    d = s1 - s0
-    denom = float(d @ d)
-    t = 0.0 if denom < 1e-18 else min(max(float((p - s0) @ d) / denom, 0.0), 1.0)
-    return float(np.linalg.norm(s0 + t * d - p))
-
-
-def _halfspace_gap(pose: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> tuple[float, np.ndarray]:
-    """Smallest height [m] of the segment above the half-space's plane, and the segment end that has it."""
-    n = pose[:3, 2]
-    o = pose[:3, 3]
-    h0, h1 = float(n @ (s0 - o)), float(n @ (s1 - o))
-    return (h0, s0) if h0 <= h1 else (h1, s1)
