@@ -64,14 +64,15 @@ def test_plan_around_obstacles_is_certified_and_within_limits(robot) -> None:
     start, goal = _blocked_problem(robot, world)
     plan = plan_motion(robot, start, goal, world=world, seed=1)
     report = plan.report
-    assert report.success and report.stage == "rrt-connect"
+    assert report.success and report.stage in ("optimization", "rrt-connect")
     trajectory = plan.trajectory
     np.testing.assert_allclose(trajectory(0.0), start, atol=1e-9)
     np.testing.assert_allclose(trajectory(trajectory.duration), goal, atol=1e-9)
     assert limit_usage(trajectory, robot.planning_limits).within(LIMIT_TOL, jerk=True)
     assert report.min_clearance >= 0.01 / 4  # the certified floor [m]
     assert _dense_min_distance(world, trajectory) > 0.0  # independent: no collision anywhere [m]
-    assert set(report.stage_times) == {"validate", "goal_ik", "path", "timing", "verify"}
+    stages = {"validate", "goal_ik", "straight", "optimize", "sample", "smooth", "timing", "verify"}
+    assert set(report.stage_times) == stages
     assert report.path_length >= np.linalg.norm(goal - start) - 1e-9
 
 
@@ -152,3 +153,74 @@ def test_segment_check_certifies_half_the_margin(robot) -> None:
     assert check.valid
     for s in np.linspace(0, 1, 101):  # the certificate holds between its evaluations too
         assert world.min_distance(a + s * (b - a))[0] >= 0.005 - CLEARANCE_TOL
+
+
+def _polyline_min_distance(world: CollisionWorld, path: np.ndarray, travel: float = 1e-3) -> float:
+    """Independent check of a joint-space polyline: samples at most ``travel`` [m] of link-point motion apart."""
+    lowest = np.inf
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        count = max(2, int(np.ceil(world.max_point_speed_bound(a, b) / travel)) + 1)
+        for s in np.linspace(0.0, 1.0, count):
+            lowest = min(lowest, world.min_distance(a + s * (b - a))[0])
+    return lowest
+
+
+def test_optimizer_pushes_the_straight_line_out_of_collision(robot) -> None:
+    from taplan.planning.optimize import optimize_path
+
+    world = CollisionWorld(robot, _table_and_panel())
+    start, goal = _blocked_problem(robot, world)
+    active = robot.group("left").indices
+    limits = robot.planning_limits
+    straight_clearance = _polyline_min_distance(world, np.array([start, goal]), travel=5e-3)
+    result = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, 0.01)
+    assert result is not None, "the optimiser should solve this detour"
+    path = result.path
+    np.testing.assert_allclose(path[0], start, atol=0.0)
+    np.testing.assert_allclose(path[-1], goal, atol=0.0)
+    others = np.setdiff1d(np.arange(robot.nq), active)
+    np.testing.assert_allclose(path[:, others], np.repeat(start[None, others], len(path), axis=0), atol=0.0)
+    assert np.all(path >= limits.lower - 1e-9) and np.all(path <= limits.upper + 1e-9)
+    assert straight_clearance < 0.01  # the straight segment was blocked [m]
+    assert _polyline_min_distance(world, path) >= 0.01 / 2 - CLEARANCE_TOL  # certified: half the margin [m]
+    assert result.clearance >= 0.01 / 2
+    straight = np.linalg.norm(goal - start)
+    length = np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
+    assert straight <= length <= 2.0 * straight  # a local detour, not a wander [rad]
+
+
+def test_optimizer_as_smoother_shortens_a_detour(robot) -> None:
+    from taplan.planning.optimize import optimize_path
+
+    world = CollisionWorld(robot, Scene())
+    limits = robot.planning_limits
+    active = robot.group("right").indices
+    start, goal, detour = robot.home.copy(), robot.home.copy(), robot.home.copy()
+    goal[active] += [0.4, -0.3, 0.2, -0.5, 0.3, 0.2, 0.1]
+    detour[active] += [-0.5, -0.6, 0.6, -0.1, -0.4, 0.5, 0.4]
+    goal, detour = np.clip(goal, limits.lower, limits.upper), np.clip(detour, limits.lower, limits.upper)
+    seed = np.array([start, detour, goal])
+    assert world.min_distance(detour)[0] > 0.01 and check_segment(world, start, detour, 0.01).valid
+    result = optimize_path(world, seed, active, limits.lower, limits.upper, 0.01)
+    assert result is not None
+    before = np.linalg.norm(np.diff(seed, axis=0), axis=1).sum()
+    after = np.linalg.norm(np.diff(result.path, axis=0), axis=1).sum()
+    assert after < before - 0.5  # [rad]: pulled toward the straight line
+    assert after <= np.linalg.norm(goal - start) * 1.02  # in free space: the straight line to 2 %
+
+
+def test_stages_select_the_path_search_and_bad_stages_are_named(robot) -> None:
+    world = CollisionWorld(robot, _table_and_panel())
+    start, goal = _blocked_problem(robot, world)
+    sampled = plan_motion(robot, start, goal, world=world, stages=("rrt-connect",), seed=2)
+    assert sampled.report.stage == "rrt-connect"
+    assert sampled.report.stage_times["optimize"] == 0.0 and sampled.report.stage_times["straight"] == 0.0
+    assert _dense_min_distance(world, sampled.trajectory) > 0.0
+    optimized = plan_motion(robot, start, goal, world=world, stages=("straight", "optimization"), seed=2)
+    assert optimized.report.stage == "optimization" and not optimized.report.smoothed
+    assert _dense_min_distance(world, optimized.trajectory) > 0.0
+    with pytest.raises(PlanningError, match="no collision-free path"):
+        plan_motion(robot, start, goal, world=world, stages=("straight",))
+    for bad in ((), ("straight", "chomp"), "straight"):
+        with pytest.raises(InvalidInputError, match="stages"):
+            plan_motion(robot, start, goal, world=world, stages=bad)

@@ -7,6 +7,7 @@ Layer order: robot -> scene -> ik / timing / stream -> planning. Cartesian strai
 from __future__ import annotations
 
 from taplan.planning.motion import MotionPlan, PlanReport, plan_motion
+from taplan.planning.optimize import OptimizedPath, optimize_path
 from taplan.planning.rrt import rrt_connect, shortcut
 from taplan.planning.verify import SegmentCheck, Verification, check_segment, verify_trajectory
 
@@ -18,6 +19,8 @@ __all__ = [
     "verify_trajectory",
     "SegmentCheck",
     "Verification",
+    "optimize_path",
+    "OptimizedPath",
     "rrt_connect",
     "shortcut",
 ]

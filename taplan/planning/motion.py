@@ -7,9 +7,11 @@
 2. **Goal IK** (pose goals ``{frame: T_root_frame}``): :func:`~taplan.ik.solve_pose` from the start, the home
    configuration and seeded random configurations; solutions closer than ``margin`` to anything are rejected and
    the one closest to the start (joint space) wins. None: :class:`~taplan.errors.PlanningError` naming the target.
-3. **Path**: the straight joint-space segment when it is certified free (stage ``"straight"``), else RRT-Connect
-   (:mod:`~taplan.planning.rrt`) followed by shortcutting (stage ``"rrt-connect"``). Every edge keeps at least
-   ``margin / 2`` by conservative advancement (:mod:`~taplan.planning.verify`).
+3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
+   (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
+   straight line, then from polylines through perturbed midpoints (``"optimization"``); RRT-Connect
+   (:mod:`~taplan.planning.rrt`) with shortcutting, then the optimiser as its smoother (``"rrt-connect"``). Every
+   edge keeps at least ``margin / 2`` by conservative advancement (:mod:`~taplan.planning.verify`).
 4. **Timing**: :func:`~taplan.timing.jerk_limited` on the path (densified so that its spline stays near the
    segments), interior corners cut by at most ``max_deviation``.
 5. **Verification**: the timed trajectory is certified at every instant (conservative advancement with the exact
@@ -29,6 +31,7 @@ import numpy.typing as npt
 
 from taplan.errors import InvalidInputError, PlanningError, TimingError
 from taplan.limits import JointLimits
+from taplan.planning.optimize import optimize_path
 from taplan.planning.rrt import rrt_connect, shortcut
 from taplan.planning.verify import check_segment, verify_trajectory
 from taplan.robot import Robot
@@ -39,6 +42,8 @@ from taplan.trajectory import Trajectory
 __all__ = ["plan_motion", "MotionPlan", "PlanReport"]
 
 DEFAULT_MARGIN = 0.01  # [m] clearance of the path's configurations (edges keep half, the timed trajectory a quarter)
+STAGES = ("straight", "optimization", "rrt-connect")
+PERTURBED_SEEDS = 2  # optimisation seeds through a random collision-free midpoint, after the straight line
 DENSIFY_STEP = 0.1  # [rad] longest path segment handed to the timing (max-norm)
 
 
@@ -48,8 +53,10 @@ class PlanReport:
 
     Attributes:
         success: True (a failure raises PlanningError).
-        stage: ``"straight"`` or ``"rrt-connect"``: what found the path.
-        stage_times: Seconds per stage (``validate``, ``goal_ik``, ``path``, ``timing``, ``verify``).
+        stage: What found the path: ``"straight"`` (the segment is free), ``"optimization"`` (sequential convex
+            programming from the straight line or a perturbed seed) or ``"rrt-connect"`` (sampling).
+        stage_times: Seconds per stage (``validate``, ``goal_ik``, ``straight``, ``optimize``, ``sample``,
+            ``smooth``, ``timing``, ``verify``; 0 for a stage that did not run).
         path_length: Joint-space length of the path [rad] (sum of Euclidean segment lengths).
         duration: Trajectory duration [s].
         min_clearance: Smallest clearance along the timed trajectory [m] (at the verification's evaluations).
@@ -57,6 +64,7 @@ class PlanReport:
         waypoints: Waypoints of the geometric path before densifying.
         timing_attempts: Timings tried until one was verified.
         goal: The goal configuration [rad] (the IK solution for a pose goal).
+        smoothed: True when the sampled path was shortened by the optimiser (stage ``"rrt-connect"``).
     """
 
     success: bool
@@ -69,6 +77,7 @@ class PlanReport:
     waypoints: int
     timing_attempts: int
     goal: np.ndarray = field(repr=False)
+    smoothed: bool = False
 
 
 @dataclass(frozen=True)
@@ -87,6 +96,84 @@ def _densify(path: list[np.ndarray], step: float) -> np.ndarray:
         pieces = max(1, int(np.ceil(np.abs(b - a).max() / step)))
         out += [a + (b - a) * k / pieces for k in range(1, pieces + 1)]
     return np.array(out)
+
+
+def _find_path(
+    world: CollisionWorld,
+    q0: np.ndarray,
+    q1: np.ndarray,
+    active: np.ndarray,
+    limits: JointLimits,
+    margin: float,
+    stages: tuple[str, ...],
+    max_time: float,
+    rng: np.random.Generator,
+    times: dict[str, float],
+) -> tuple[str, list[np.ndarray], bool]:
+    """(stage, path, smoothed): the first stage in ``stages`` that finds a certified path."""
+    deadline = time.perf_counter() + max_time
+    for key in ("straight", "optimize", "sample", "smooth"):
+        times[key] = 0.0
+    for stage in stages:
+        clock = time.perf_counter()
+        if stage == "straight":
+            found = check_segment(world, q0, q1, margin).valid
+            times["straight"] += time.perf_counter() - clock
+            if found:
+                return stage, [q0, q1], False
+        elif stage == "optimization":
+            for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, rng):
+                result = optimize_path(world, seed_path, active, limits.lower, limits.upper, margin, deadline=deadline)
+                if result is not None:
+                    times["optimize"] += time.perf_counter() - clock
+                    return stage, list(result.path), False
+                if time.perf_counter() >= deadline:
+                    break
+            times["optimize"] += time.perf_counter() - clock
+        else:
+            remaining = max(deadline - time.perf_counter(), 0.0)
+            found_path = rrt_connect(
+                world, q0, q1, active, limits.lower, limits.upper, margin, max_time=remaining, rng=rng
+            )
+            if found_path is None:
+                times["sample"] += time.perf_counter() - clock
+                break
+            path = shortcut(world, found_path, margin, rng=rng)
+            times["sample"] += time.perf_counter() - clock
+            clock = time.perf_counter()
+            smooth = optimize_path(world, np.array(path), active, limits.lower, limits.upper, margin, max_iterations=15)
+            times["smooth"] += time.perf_counter() - clock
+            if smooth is not None and _length(smooth.path) < _length(np.array(path)):
+                return stage, list(smooth.path), True
+            return stage, path, False
+    raise PlanningError(f"no collision-free path found within {max_time:g} s (stages: {', '.join(stages)})")
+
+
+def _length(path: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+
+
+def _optimization_seeds(
+    world: CollisionWorld,
+    q0: np.ndarray,
+    q1: np.ndarray,
+    active: np.ndarray,
+    limits: JointLimits,
+    margin: float,
+    rng: np.random.Generator,
+) -> list[np.ndarray]:
+    """The straight line, then polylines through random collision-free configurations near its middle."""
+    seeds = [np.array([q0, q1])]
+    spread = 0.5 * np.maximum(np.abs(q1 - q0)[active], 0.3)  # [rad]
+    for _ in range(PERTURBED_SEEDS):
+        for _attempt in range(20):
+            middle = (q0 + q1) / 2
+            middle[active] += rng.uniform(-1.0, 1.0, active.size) * spread
+            middle = np.clip(middle, limits.lower, limits.upper)
+            if world.min_distance(middle)[0] >= margin:
+                seeds.append(np.array([q0, middle, q1]))
+                break
+    return seeds
 
 
 def _goal_ik(
@@ -153,6 +240,7 @@ def plan_motion(
     margin: float = DEFAULT_MARGIN,
     max_deviation: float = 0.01,
     max_time: float = 10.0,
+    stages: tuple[str, ...] = STAGES,
     ik_seeds: int = 6,
     seed: int = 0,
 ) -> MotionPlan:
@@ -167,7 +255,8 @@ def plan_motion(
         world: A ready :class:`~taplan.scene.CollisionWorld` (its scene is used instead of ``scene``).
         margin: Clearance [m] of the path's configurations; the timed trajectory is certified to keep a quarter.
         max_deviation: Largest corner cut of the jerk-limited timing at interior waypoints [rad].
-        max_time: Time budget of the sampling stage [s].
+        max_time: Time budget of the path search (optimisation and sampling) [s].
+        stages: Path stages to try, in this order: any of ``"straight"``, ``"optimization"``, ``"rrt-connect"``.
         ik_seeds: Random seeds of the goal IK beyond the start and home.
         seed: Seed of every random choice (reproducible plans).
 
@@ -186,6 +275,8 @@ def plan_motion(
         raise InvalidInputError("limits", limits, f"JointLimits over the robot's joints {robot.joint_names}")
     if not (isinstance(margin, (int, float)) and np.isfinite(margin) and margin > 0):
         raise InvalidInputError("margin", margin, "a clearance > 0 [m]")
+    if not (isinstance(stages, tuple) and stages and set(stages) <= set(STAGES)):
+        raise InvalidInputError("stages", stages, f"a non-empty tuple of {STAGES}")
     world = world if world is not None else CollisionWorld(robot, scene)
     q0 = robot.check_configuration(start, "start")
     if not limits.within(q0):
@@ -204,25 +295,17 @@ def plan_motion(
         world.check_configuration(q1, "goal", margin=margin)
     times["goal_ik"] = time.perf_counter() - clock
 
-    clock = time.perf_counter()
     active = np.flatnonzero(np.abs(q1 - q0) > 1e-12)
     if active.size == 0:
         raise InvalidInputError("goal", "the start configuration", "a goal that differs from the start")
-    if check_segment(world, q0, q1, margin).valid:
-        stage, path = "straight", [q0, q1]
-    else:
-        stage = "rrt-connect"
-        found = rrt_connect(world, q0, q1, active, limits.lower, limits.upper, margin, max_time=max_time, rng=rng)
-        if found is None:
-            raise PlanningError(f"no collision-free path found within {max_time:g} s (RRT-Connect)")
-        path = shortcut(world, found, margin, rng=rng)
-    times["path"] = time.perf_counter() - clock
+    stage, path, smoothed = _find_path(world, q0, q1, active, limits, margin, stages, max_time, rng, times)
 
     from taplan.timing.jerk_limited import jerk_limited
 
     sub = limits.subset([robot.joint_names[i] for i in active])
     timing_time = verify_time = 0.0
     trajectory = verification = None
+    timing_error: TimingError | None = None
     attempts = 0
     for attempt, step in enumerate((DENSIFY_STEP, DENSIFY_STEP / 2, DENSIFY_STEP / 4)):
         attempts = attempt + 1
@@ -232,7 +315,9 @@ def plan_motion(
         try:
             part = jerk_limited(dense[:, active], sub, method=method, max_deviation=max_deviation).trajectory
         except TimingError as exc:
-            raise PlanningError(f"timing the path failed: {exc}") from exc
+            timing_error = exc
+            timing_time += time.perf_counter() - clock
+            continue  # a denser path stays closer to its segments
         trajectory = _full_trajectory(part, robot.joint_names, active, q0)
         timing_time += time.perf_counter() - clock
         clock = time.perf_counter()
@@ -242,7 +327,8 @@ def plan_motion(
             break
     times["timing"] = timing_time
     times["verify"] = verify_time
-    assert trajectory is not None and verification is not None
+    if trajectory is None or verification is None:
+        raise PlanningError(f"timing the path failed: {timing_error}") from timing_error
     if not verification.collision_free:
         pair = verification.pair
         raise PlanningError(
@@ -260,6 +346,7 @@ def plan_motion(
         min_clearance_pair=verification.pair,
         waypoints=len(path),
         timing_attempts=attempts,
+        smoothed=smoothed,
         goal=q1,
     )
     return MotionPlan(trajectory, geometric, report)

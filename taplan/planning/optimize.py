@@ -1,0 +1,262 @@
+"""Path optimisation by sequential convex programming (TrajOpt-style, Schulman et al. 2014) in joint space.
+
+The path is ``K`` waypoints with fixed ends. Each iteration linearises every pair's signed distance at the
+waypoints *and* at the midpoints of the segments (``d + J Δq ≥ target``, the midpoint rows sharing ``J / 2``
+between the two waypoints) and solves one QP through qpsolvers:
+
+    minimise  Σ_k |x_{k+1} − x_k|² + μ Σ_i t_i
+    s.t.      d_i + J_i Δx + t_i ≥ target,  t_i ≥ 0,  |Δx|_∞ ≤ δ,  lower ≤ x ≤ upper
+
+(the ℓ1 penalty of TrajOpt with slacks ``t``). A step is kept when the exact merit (the same objective with the true
+distances) improves by at least a tenth of what the QP predicted; the trust region ``δ`` grows after a kept step and
+shrinks after a rejected one; ``μ`` grows while constraints stay violated. The result is returned only when every
+segment is certified by conservative advancement (:func:`~taplan.planning.verify.check_segment`), otherwise None.
+
+Used from the straight line (and perturbed seeds) before sampling, and as the smoother of a sampled path.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as sp
+
+from taplan.planning.verify import check_segment
+from taplan.scene.world import CollisionWorld
+
+__all__ = ["optimize_path", "OptimizedPath", "resample"]
+
+ACTIVATION = 0.04  # [m] pairs closer than target + this enter the linearisation
+SEGMENT_STEP = 0.15  # [rad] waypoint spacing (max-norm) of the optimised path
+LIMIT_INSET = 0.01  # [rad] waypoints stay this far inside the position limits (room for the timing spline)
+REFINEMENTS = 4  # segment splits after a failed certification
+
+
+@dataclass(frozen=True)
+class OptimizedPath:
+    """A certified path: ``path`` (K, nq), its ``iterations``, the smallest clearance seen at the evaluations [m]."""
+
+    path: np.ndarray
+    iterations: int
+    clearance: float
+
+
+def resample(path: np.ndarray, count: int) -> np.ndarray:
+    """``count`` configurations evenly spaced in arc length (Euclidean) along the polyline ``path`` (K, n)."""
+    path = np.asarray(path, dtype=float)
+    lengths = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(lengths)])
+    if s[-1] <= 0:
+        return np.repeat(path[:1], count, axis=0)
+    wanted = np.linspace(0.0, s[-1], count)
+    return np.column_stack([np.interp(wanted, s, path[:, j]) for j in range(path.shape[1])])
+
+
+class _Problem:
+    """The QP's fixed parts for K waypoints of n active joints."""
+
+    def __init__(self, start: np.ndarray, goal: np.ndarray, K: int) -> None:
+        n = start.size
+        self.K, self.n = K, n
+        self.N = (K - 2) * n
+        # differences x_{k+1} - x_k as D x + c over the interior waypoints
+        D = sp.lil_matrix(((K - 1) * n, self.N))
+        c = np.zeros((K - 1) * n)
+        for k in range(K - 1):
+            rows = slice(k * n, (k + 1) * n)
+            if k + 1 <= K - 2:
+                D[rows, k * n : (k + 1) * n] = sp.identity(n)
+            else:
+                c[rows] += goal
+            if k >= 1:
+                D[rows, (k - 1) * n : k * n] = -sp.identity(n)
+            else:
+                c[rows] -= start
+        self.D = D.tocsr()
+        self.c = c
+        self.P = (2.0 * self.D.T @ self.D).tocsc()
+        self.q = 2.0 * self.D.T @ c
+
+    def cost(self, x: np.ndarray) -> float:
+        r = self.D @ x + self.c
+        return float(r @ r)
+
+
+def _evaluate(
+    world: CollisionWorld, full: np.ndarray, path: np.ndarray, active: np.ndarray, cutoff: float
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per evaluation point (waypoints 1..K-2, then the K-1 midpoints): (distances, Jacobian rows over active)."""
+    K = len(path)
+    points = [path[k] for k in range(1, K - 1)] + [(path[k] + path[k + 1]) / 2 for k in range(K - 1)]
+    out = []
+    for p in points:
+        q = full.copy()
+        q[active] = p
+        d = world.distances(q, cutoff=cutoff)
+        assert d.jacobian is not None and d.travel is not None
+        movable = d.travel[:, active].any(axis=1)  # pairs the moving joints cannot change stay as they are
+        out.append((d.distance[movable], d.jacobian[movable][:, active]))
+    return out
+
+
+def _lowest(evaluations: list[tuple[np.ndarray, np.ndarray]]) -> float:
+    return min((float(d.min()) for d, _ in evaluations if d.size), default=np.inf)
+
+
+def _violation(evaluations: list[tuple[np.ndarray, np.ndarray]], target: float) -> float:
+    return float(sum(np.maximum(0.0, target - d).sum() for d, _ in evaluations))
+
+
+def optimize_path(
+    world: CollisionWorld,
+    path: np.ndarray,
+    active: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    margin: float,
+    *,
+    max_iterations: int = 30,
+    deadline: float = np.inf,
+    solver: str = "proxqp",
+) -> OptimizedPath | None:
+    """Optimise ``path`` (K, nq) in the ``active`` joints to a short path that keeps ``margin`` [m] (certified at
+    ``margin / 2`` between waypoints, like every planner edge); None when no certified path was found.
+
+    Args:
+        world: The collision world.
+        path: Seed path (K, nq), its ends fixed; resampled to waypoints about ``SEGMENT_STEP`` apart.
+        active: Indices of the joints that move.
+        lower: Lower position limits [rad] (nq,).
+        upper: Upper position limits [rad] (nq,).
+        margin: Clearance [m].
+        max_iterations: QP solves at most.
+        deadline: ``time.perf_counter()`` value after which the optimisation gives up.
+        solver: qpsolvers backend.
+    """
+    path = np.asarray(path, dtype=float)
+    full = path[0].copy()
+    seed = path[:, active]
+    length = float(np.abs(np.diff(seed, axis=0)).max(axis=1).sum())
+    x_path = resample(seed, int(np.clip(np.ceil(length / SEGMENT_STEP) + 1, 5, 40)))
+    iterations = 0
+    for _ in range(REFINEMENTS + 1):
+        x_path, used = _sequential_convex(
+            world, full, x_path, active, lower, upper, margin, max_iterations - iterations, deadline, solver
+        )
+        iterations += used
+        if x_path is None:
+            return None
+        configurations = np.repeat(full[None, :], len(x_path), axis=0)
+        configurations[:, active] = x_path
+        checks = [
+            check_segment(world, a, b, margin) for a, b in zip(configurations[:-1], configurations[1:], strict=True)
+        ]
+        if all(c.valid for c in checks):
+            return OptimizedPath(configurations, iterations, min(c.clearance for c in checks))
+        # a dip between the evaluated points: evaluate there too (split the segment) and optimise on
+        refined = [x_path[0]]
+        for k, c in enumerate(checks):
+            if not c.valid:
+                refined.append((x_path[k] + x_path[k + 1]) / 2)
+            refined.append(x_path[k + 1])
+        x_path = np.array(refined)
+        if iterations >= max_iterations or time.perf_counter() >= deadline:
+            return None
+    return None
+
+
+def _sequential_convex(
+    world: CollisionWorld,
+    full: np.ndarray,
+    x_path: np.ndarray,
+    active: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    margin: float,
+    max_iterations: int,
+    deadline: float,
+    solver: str,
+) -> tuple[np.ndarray | None, int]:
+    """The SCP iterations from ``x_path`` (K, n active): (optimised path or None when still colliding, QPs)."""
+    K = len(x_path)
+    problem = _Problem(x_path[0], x_path[-1], K)
+    inset = np.minimum(LIMIT_INSET, (upper[active] - lower[active]) / 4)
+    lo = np.tile(lower[active] + inset, K - 2)
+    hi = np.tile(upper[active] - inset, K - 2)
+    target = 2.0 * margin  # headroom so that the certified segments keep margin at their evaluations
+    cutoff = target + ACTIVATION
+    trust, mu = 0.2, 10.0
+    x = x_path[1:-1].ravel()
+    evaluations = _evaluate(world, full, x_path, active, cutoff)
+    merit = problem.cost(x) + mu * _violation(evaluations, target)
+    iterations = 0
+    while iterations < max_iterations and time.perf_counter() < deadline:
+        iterations += 1
+        G, h = _linearised(problem, evaluations, x, target)
+        m = G.shape[0]
+        P = sp.block_diag([problem.P, sp.identity(m) * 1e-6]).tocsc()
+        q = np.concatenate([problem.q, np.full(m, mu)])
+        G = sp.hstack([G, -sp.identity(m)]).tocsc() if m else sp.csc_matrix((0, problem.N))
+        # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
+        lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(m)])
+        ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(m, np.inf)])
+        z = qpsolvers.solve_qp(P, q, G if m else None, h if m else None, lb=lb, ub=ub, solver=solver)
+        if z is None:
+            trust /= 2
+            if trust < 1e-3:
+                break
+            continue
+        x_new, slack = z[: problem.N], z[problem.N :]
+        predicted = merit - (problem.cost(x_new) + mu * float(np.maximum(slack, 0.0).sum()))
+        candidate = np.vstack([x_path[0], x_new.reshape(K - 2, -1), x_path[-1]])
+        new_evaluations = _evaluate(world, full, candidate, active, cutoff)
+        new_merit = problem.cost(x_new) + mu * _violation(new_evaluations, target)
+        if merit - new_merit >= 0.1 * max(predicted, 0.0) and new_merit < merit:
+            improvement = merit - new_merit
+            x, evaluations, merit, x_path = x_new, new_evaluations, new_merit, candidate
+            trust = min(trust * 1.5, 0.5)
+            if _lowest(evaluations) >= margin and improvement < 1e-3 * max(merit, 1e-9):
+                break
+        else:
+            trust /= 2
+            if trust < 1e-3:
+                if _lowest(evaluations) >= margin:
+                    break
+                mu *= 10.0  # stuck while infeasible: weigh the constraints more and start again
+                trust = 0.1
+                merit = problem.cost(x) + mu * _violation(evaluations, target)
+                if mu > 1e4:
+                    break
+    return (x_path if _lowest(evaluations) >= margin else None), iterations
+
+
+def _linearised(
+    problem: _Problem, evaluations: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray, target: float
+) -> tuple[sp.csr_matrix, np.ndarray]:
+    """Rows ``-J Δx - t ≤ d - target`` (without the slack column) as ``G x ≤ h``."""
+    K, n = problem.K, problem.n
+    rows, cols, vals, h = [], [], [], []
+    r = 0
+    for e, (d, J) in enumerate(evaluations):
+        if e < K - 2:
+            blocks = [(e, 1.0)]  # waypoint e + 1 is variable block e
+        else:
+            k = e - (K - 2)  # midpoint of waypoints k, k + 1
+            blocks = [(b - 1, 0.5) for b in (k, k + 1) if 1 <= b <= K - 2]
+        for p in range(len(d)):
+            if not np.any(J[p]):
+                continue  # a pair the moving joints cannot change
+            jx = 0.0
+            for block, weight in blocks:
+                columns = np.arange(block * n, (block + 1) * n)
+                rows += [r] * n
+                cols += columns.tolist()
+                vals += (-weight * J[p]).tolist()
+                jx += weight * float(J[p] @ x[columns])
+            h.append(d[p] - target - jx)
+            r += 1
+    G = sp.csr_matrix((vals, (rows, cols)), shape=(r, problem.N))
+    return G, np.array(h)
