@@ -29,10 +29,10 @@ from taplan.check import Report, check
 from taplan.errors import InfeasibleError
 from taplan.ik import solve_pose
 from taplan.limits import JointLimits
+from taplan.planning.cartesian import cartesian_offset
 from taplan.reference import IndustrialSimulator, JointModeRobot, JointTrajectoryController, Replay
 from taplan.robot import Robot
 from taplan.timing import jerk_limited
-from taplan.timing.cartesian import cartesian_offset
 from taplan.trajectory import Trajectory, Waypoint, concatenate
 
 __all__ = ["DemoResult", "PlanResult", "Comparison", "run_demo", "READY_POSE"]

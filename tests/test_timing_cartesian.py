@@ -172,3 +172,33 @@ def test_bad_inputs_raise(teleavatar: taplan.Robot, kwargs: dict, error: type[Ex
 def test_zero_motion_raises(teleavatar: taplan.Robot) -> None:
     with pytest.raises(InvalidInputError, match="equal to the start"):
         cartesian_offset(teleavatar, teleavatar.home, {"right_ee": [0.0, 0.0, 0.0]})
+
+
+def test_cartesian_line_respects_a_scene(teleavatar) -> None:
+    """With a scene the line is certified collision-free, or refused with the pair and the distance in mm."""
+    from taplan.errors import CollisionError, PlanningError
+    from taplan.planning import cartesian_offset as planning_offset
+    from taplan.scene import Box, CollisionWorld, Scene
+    from taplan.timing.cartesian import cartesian_offset as compat_offset
+
+    assert planning_offset is compat_offset is cartesian_offset  # the compatibility imports are the same function
+    q = teleavatar.home
+    hand = teleavatar.frame_pose(q, "right_ee")[:3, 3]
+    below = Scene()
+    below.add("slab", Box((0.3, 0.3, 0.02)), ((hand + [0.0, 0.0, -0.14]).tolist(), [0, 0, 0, 1]))
+    world = CollisionWorld(teleavatar, below)
+    free = cartesian_offset(teleavatar, q, {"right_ee": [0.0, 0.0, 0.05]}, scene=world, clearance=0.005)
+    assert free.min_clearance > 0.005  # certified [m]
+    assert free.min_clearance_pair != ("", "")
+    samples = free.trajectory(np.linspace(0.0, free.trajectory.duration, 200))
+    assert min(world.min_distance(s)[0] for s in samples) > 0.005  # independent samples [m]
+    with pytest.raises(PlanningError, match=r"comes within -?\d+\.\d mm of collision \(.* / slab at t = "):
+        cartesian_offset(teleavatar, q, {"right_ee": [0.0, 0.0, -0.08]}, scene=below)
+    inside = Scene()
+    inside.add("block", Box((0.1, 0.1, 0.1)), (hand.tolist(), [0, 0, 0, 1]))
+    with pytest.raises(CollisionError, match=r"start_q: .* collides with block"):
+        cartesian_offset(teleavatar, q, {"right_ee": [0.0, 0.0, 0.05]}, scene=inside)
+    with pytest.raises(InvalidInputError, match="scene"):
+        cartesian_offset(teleavatar, q, {"right_ee": [0.0, 0.0, 0.05]}, scene="table.yaml")
+    with pytest.raises(InvalidInputError, match="clearance"):
+        cartesian_offset(teleavatar, q, {"right_ee": [0.0, 0.0, 0.05]}, scene=below, clearance=-1.0)

@@ -1,17 +1,21 @@
-"""Planners that compose the scene, IK and timing: collision-free motion in a scene (:func:`plan_motion`).
+"""Planners that compose the scene, IK and timing: collision-free motion in a scene (:func:`plan_motion`) and
+Cartesian straight lines through IK (:func:`cartesian_line`, also importable from :mod:`taplan.timing`).
 
-Layer order: robot -> scene -> ik / timing / stream -> planning. Cartesian straight lines through IK are in
-:mod:`taplan.timing.cartesian`.
+Layer order: robot -> scene -> ik / timing / stream -> planning -> trajectory -> reference / check.
 """
 
 from __future__ import annotations
 
+from taplan.planning.cartesian import CartesianResult, cartesian_line, cartesian_offset
 from taplan.planning.motion import MotionPlan, PlanReport, plan_motion
 from taplan.planning.optimize import OptimizedPath, optimize_path
 from taplan.planning.rrt import rrt_connect, shortcut
 from taplan.planning.verify import SegmentCheck, Verification, check_segment, verify_trajectory
 
 __all__ = [
+    "cartesian_line",
+    "cartesian_offset",
+    "CartesianResult",
     "plan_motion",
     "MotionPlan",
     "PlanReport",

@@ -5,13 +5,15 @@ Module map: :mod:`~taplan.timing.path` (geometric path ``q(s)``), :mod:`~taplan.
 constraint exact on grid segments), :mod:`~taplan.timing.toppra_retime` (``retime``),
 :mod:`~taplan.timing.jerk_limited` (TOPP-RA + moving-average filter of the path
 timing), :mod:`~taplan.timing.sync` (dual-arm time base), :mod:`~taplan.timing.limits_check` (exact peak usage of
-the limits), :mod:`~taplan.timing.cartesian` (straight-line end-effector motions through IK),
+the limits), :mod:`~taplan.planning.cartesian` (straight lines through IK: a
+planner one layer up, still importable from here),
 :mod:`~taplan.timing.optimize` (casadi/ipopt minimum-time or minimum-jerk trajectories).
 """
 
 from __future__ import annotations
 
-from taplan.timing.cartesian import CartesianResult, cartesian_line, cartesian_offset, line_deviation
+from typing import Any
+
 from taplan.timing.jerk_limited import JerkLimitedResult, filter_profile, jerk_limited
 from taplan.timing.limits_check import LimitUsage, limit_usage, sampled_limit_usage
 from taplan.timing.optimize import OptimizationResult, optimize
@@ -40,3 +42,16 @@ __all__ = [
     "synchronise",
     "time_optimal_profile",
 ]
+
+
+_MOVED_TO_PLANNING = ("CartesianResult", "cartesian_line", "cartesian_offset", "line_deviation")
+
+
+def __getattr__(name: str) -> Any:
+    # Cartesian lines compose IK, timing and the scene: they live in taplan.planning (a layer above), imported
+    # lazily here so that existing ``from taplan.timing import cartesian_line`` keeps working without a cycle
+    if name in _MOVED_TO_PLANNING:
+        from taplan.planning import cartesian
+
+        return getattr(cartesian, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
