@@ -12,8 +12,9 @@
    straight line, then from polylines through perturbed midpoints (``"optimization"``); RRT-Connect
    (:mod:`~taplan.planning.rrt`) with shortcutting, then the optimiser as its smoother (``"rrt-connect"``). Every
    edge keeps at least ``margin / 2`` by conservative advancement (:mod:`~taplan.planning.verify`).
-4. **Timing**: :func:`~taplan.timing.jerk_limited` on the path (densified so that its spline stays near the
-   segments), interior corners cut by at most ``max_deviation``.
+4. **Timing**: a straight segment gets the time-optimal jerk-limited motion along it
+   (:func:`~taplan.timing.straight.straight_line`, ruckig); a polyline :func:`~taplan.timing.jerk_limited`
+   (densified so that its spline stays near the segments), interior corners cut by at most ``max_deviation``.
 5. **Verification**: the timed trajectory is certified at every instant (conservative advancement with the exact
    peak joint speeds), never only at waypoints. If it comes closer than ``margin / 4``, the path is densified and
    retimed (with exact waypoints at the last attempt); a plan that fails is never returned: PlanningError.
@@ -301,19 +302,26 @@ def plan_motion(
     stage, path, smoothed = _find_path(world, q0, q1, active, limits, margin, stages, max_time, rng, times)
 
     from taplan.timing.jerk_limited import jerk_limited
+    from taplan.timing.straight import straight_line
 
     sub = limits.subset([robot.joint_names[i] for i in active])
     timing_time = verify_time = 0.0
     trajectory = verification = None
     timing_error: TimingError | None = None
     attempts = 0
-    for attempt, step in enumerate((DENSIFY_STEP, DENSIFY_STEP / 2, DENSIFY_STEP / 4)):
+    # a straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA,
+    # denser and finally through the exact waypoints when the verification asks for more accuracy
+    plans = ([None] if len(path) == 2 else []) + [DENSIFY_STEP, DENSIFY_STEP / 2, DENSIFY_STEP / 4]
+    for attempt, step in enumerate(plans):
         attempts = attempt + 1
         clock = time.perf_counter()
-        dense = _densify(path, step)
-        method = "path" if attempt == 2 else "joint"
         try:
-            part = jerk_limited(dense[:, active], sub, method=method, max_deviation=max_deviation).trajectory
+            if step is None:
+                part = straight_line(path[0][active], path[1][active], sub)
+            else:
+                dense = _densify(path, step)
+                method = "path" if attempt == len(plans) - 1 else "joint"
+                part = jerk_limited(dense[:, active], sub, method=method, max_deviation=max_deviation).trajectory
         except TimingError as exc:
             timing_error = exc
             timing_time += time.perf_counter() - clock

@@ -7,6 +7,7 @@ constraint exact on grid segments), :mod:`~taplan.timing.toppra_retime` (``retim
 timing), :mod:`~taplan.timing.sync` (dual-arm time base), :mod:`~taplan.timing.limits_check` (exact peak usage of
 the limits), :mod:`~taplan.planning.cartesian` (straight lines through IK: a
 planner one layer up, still importable from here),
+:mod:`~taplan.timing.straight` (time-optimal jerk-limited straight joint-space segment, ruckig),
 :mod:`~taplan.timing.optimize` (casadi/ipopt minimum-time or minimum-jerk trajectories).
 """
 
@@ -18,6 +19,7 @@ from taplan.timing.jerk_limited import JerkLimitedResult, filter_profile, jerk_l
 from taplan.timing.limits_check import LimitUsage, limit_usage, sampled_limit_usage
 from taplan.timing.optimize import OptimizationResult, optimize
 from taplan.timing.path import Path
+from taplan.timing.straight import straight_line
 from taplan.timing.sync import split, synchronise
 from taplan.timing.toppra_retime import PathProfile, grid_for, retime, time_optimal_profile
 
@@ -39,6 +41,7 @@ __all__ = [
     "retime",
     "sampled_limit_usage",
     "split",
+    "straight_line",
     "synchronise",
     "time_optimal_profile",
 ]

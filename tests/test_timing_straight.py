@@ -1,0 +1,62 @@
+"""taplan.timing.straight_line: ruckig's time-optimal jerk-limited straight segment, checked against the closed-form
+1-DOF duration, the TOPP-RA optimum, exact limit usage and the segment itself."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.errors import InvalidInputError
+from taplan.limits import JointLimits
+from taplan.timing import jerk_limited, limit_usage, retime, straight_line
+
+
+def _one_joint(v: float, a: float, j: float) -> JointLimits:
+    return JointLimits(("j",), np.array([-10.0]), np.array([10.0]), np.array([v]), np.array([a]), np.array([j]))
+
+
+def test_one_joint_matches_the_closed_form_duration() -> None:
+    # cruise reached: T = L/v + v/a + a/j when v >= a²/j and L >= v (v/a + a/j)
+    v, a, j, length = 1.0, 2.0, 10.0, 2.0
+    trajectory = straight_line([0.0], [length], _one_joint(v, a, j))
+    assert trajectory.duration == pytest.approx(length / v + v / a + a / j, abs=1e-9)  # [s]
+    # no cruise, acceleration reached: T = a/j + sqrt((a/j)² + 4L/a) for v large
+    length = 0.5
+    trajectory = straight_line([0.0], [length], _one_joint(100.0, a, j))
+    assert trajectory.duration == pytest.approx(a / j + np.sqrt((a / j) ** 2 + 4 * length / a), abs=1e-9)  # [s]
+    np.testing.assert_allclose(trajectory(trajectory.duration), [length], atol=1e-12)
+
+
+def test_dual_arm_segment_stays_on_the_line_within_the_limits() -> None:
+    robot = taplan.Robot.teleavatar()
+    limits = robot.planning_limits
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        a = limits.lower + rng.uniform(0.1, 0.9, robot.nq) * (limits.upper - limits.lower)
+        b = limits.lower + rng.uniform(0.1, 0.9, robot.nq) * (limits.upper - limits.lower)
+        trajectory = straight_line(a, b, limits)
+        assert limit_usage(trajectory, limits).within(1e-9, jerk=True)  # exact peaks, relative
+        q = trajectory(np.linspace(0.0, trajectory.duration, 400))
+        s = (q - a) @ (b - a) / ((b - a) @ (b - a))
+        assert np.abs(q - (a + s[:, None] * (b - a))).max() < 1e-9  # on the segment [rad]
+        assert np.all(np.diff(s) >= -1e-12)  # monotone: never backs up
+        np.testing.assert_allclose(trajectory(0.0), a, atol=1e-12)
+        np.testing.assert_allclose(trajectory(trajectory.duration), b, atol=1e-9)
+        np.testing.assert_allclose(trajectory(trajectory.duration, 1), 0.0, atol=1e-9)
+        optimum = retime(np.linspace(a, b, 5), limits).duration  # TOPP-RA, no jerk limit
+        ramp = float(np.max(limits.acceleration / limits.jerk))
+        assert optimum - 1e-3 <= trajectory.duration <= optimum + 1.5 * ramp  # [s]: about one jerk ramp more
+        assert trajectory.duration < jerk_limited(np.linspace(a, b, 5), limits).trajectory.duration
+
+
+def test_bad_input_is_named() -> None:
+    limits = _one_joint(1.0, 2.0, 10.0)
+    with pytest.raises(InvalidInputError, match="goal"):
+        straight_line([0.0], [0.0], limits)
+    with pytest.raises(InvalidInputError, match="goal"):
+        straight_line([0.0], [11.0], limits)
+    with pytest.raises(InvalidInputError, match="start"):
+        straight_line([np.nan], [1.0], limits)
+    with pytest.raises(InvalidInputError, match="limits"):
+        straight_line([0.0], [1.0], {"velocity": 1.0})
