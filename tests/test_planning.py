@@ -224,3 +224,38 @@ def test_stages_select_the_path_search_and_bad_stages_are_named(robot) -> None:
     for bad in ((), ("straight", "chomp"), "straight"):
         with pytest.raises(InvalidInputError, match="stages"):
             plan_motion(robot, start, goal, world=world, stages=bad)
+
+
+def test_verification_is_sound_and_tight_near_an_obstacle(robot) -> None:
+    """A motion grazing a sphere: certified for a floor 3 mm under the true minimum, refused 1 mm above it."""
+    from taplan.scene import Sphere
+    from taplan.timing import straight_line
+
+    right = robot.group("right").indices
+    a, b = robot.home.copy(), robot.home.copy()
+    b[right] += [0.5, -0.3, 0.3, -0.6, 0.2, 0.3, 0.0]
+    limits = robot.planning_limits.subset([robot.joint_names[i] for i in right])
+    motion = straight_line(a[right], b[right], limits)
+    middle = a.copy()
+    middle[right] = motion(motion.duration / 2)
+    tcp = robot.frame_pose(middle, "right_tcp")[:3, 3]
+    scene = Scene()
+    scene.add("ball", Sphere(0.03), ((tcp + [0.0, 0.0, 0.08]).tolist(), [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    full = _full(robot, motion, a)
+    truth = _dense_min_distance(world, full, travel=2e-4)  # [m]
+    assert 0.005 < truth < 0.08
+    certified = verify_trajectory(world, full, floor=truth - 0.003, hold=a)
+    assert certified.collision_free and certified.min_clearance >= truth - 1e-9
+    assert "ball" in certified.pair  # the closest approach is the grazing one
+    refused = verify_trajectory(world, full, floor=truth + 0.001, hold=a)
+    assert not refused.collision_free
+
+
+def _full(robot: taplan.Robot, part: taplan.Trajectory, hold: np.ndarray) -> taplan.Trajectory:
+    index = robot.indices(part.joint_names)
+    c = part.coefficients
+    coefficients = np.zeros((c.shape[0], c.shape[1], robot.nq))
+    coefficients[:, 0, :] = hold
+    coefficients[:, :, index] = c
+    return taplan.Trajectory.from_polynomials(part.times, coefficients, robot.joint_names)

@@ -32,6 +32,7 @@ __all__ = ["optimize_path", "OptimizedPath", "resample"]
 ACTIVATION = 0.04  # [m] pairs closer than target + this enter the linearisation
 SEGMENT_STEP = 0.15  # [rad] waypoint spacing (max-norm) of the optimised path
 LIMIT_INSET = 0.01  # [rad] waypoints stay this far inside the position limits (room for the timing spline)
+DENSE_SOLVERS = ("daqp", "quadprog", "proxqp")  # given dense matrices; others get scipy.sparse
 REFINEMENTS = 4  # segment splits after a failed certification
 
 
@@ -120,7 +121,7 @@ def optimize_path(
     *,
     max_iterations: int = 30,
     deadline: float = np.inf,
-    solver: str = "proxqp",
+    solver: str = "daqp",
 ) -> OptimizedPath | None:
     """Optimise ``path`` (K, nq) in the ``active`` joints to a short path that keeps ``margin`` [m] (certified at
     ``margin / 2`` between waypoints, like every planner edge); None when no certified path was found.
@@ -134,7 +135,8 @@ def optimize_path(
         margin: Clearance [m].
         max_iterations: QP solves at most.
         deadline: ``time.perf_counter()`` value after which the optimisation gives up.
-        solver: qpsolvers backend.
+        solver: qpsolvers backend (daqp, a dense active-set solver, was the fastest on these few-hundred-variable
+            QPs: 6.5 ms against proxqp's 12 ms sparse and 24 ms dense, same solution to 1e-6).
     """
     path = np.asarray(path, dtype=float)
     full = path[0].copy()
@@ -199,7 +201,9 @@ def _sequential_convex(
         m = G.shape[0]
         P = sp.block_diag([problem.P, sp.identity(m) * 1e-6]).tocsc()
         q = np.concatenate([problem.q, np.full(m, mu)])
-        G = sp.hstack([G, -sp.identity(m)]).tocsc() if m else sp.csc_matrix((0, problem.N))
+        G = sp.hstack([G, -sp.identity(m)]).tocsc() if m else sp.csc_matrix((0, problem.N + m))
+        if solver in DENSE_SOLVERS:
+            P, G = P.toarray(), G.toarray()
         # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
         lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(m)])
         ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(m, np.inf)])

@@ -6,7 +6,8 @@ configurations (``travel_p``: the reach of every joint that moves either member,
 so a step that keeps ``travel_p · |Δq| < d_p − floor`` for every pair keeps at least ``floor`` of clearance all along
 it. Stepping like that certifies a whole segment or trajectory, not only its samples (conservative advancement).
 Along a timed trajectory ``|Δq_j|`` over ``Δt`` is bounded by ``Δt · max|q̇_j|`` with the exact peak speeds of the
-polynomial pieces in the window.
+polynomial pieces in the window, and the distances at both ends of an interval bound it from both sides (the
+interval is halved until the bound holds).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ __all__ = ["SegmentCheck", "check_segment", "verify_trajectory", "Verification"]
 
 MIN_CERTIFIED = 1e-4  # [m] below this clearance a step would be too small to certify: report a failure
 LOOKAHEAD = 0.1  # [s] window over which the peak joint speeds bound a trajectory step
+MIN_INTERVAL = 1e-6  # [s] a trajectory interval this short that still cannot be certified is a failure
 BOUND_BEYOND = 0.1  # [m] pairs whose bounding spheres are farther apart use that gap (a lower bound): no coal query
 
 
@@ -88,6 +90,11 @@ def verify_trajectory(
 ) -> Verification:
     """Certify ``trajectory`` keeps more than ``floor`` [m] of clearance at every instant.
 
+    Each pair's distance changes at most at ``rate_p = travel_p · max|q̇|`` (exact peak joint speeds of the pieces
+    in the interval), so over ``[t_a, t_b]`` it stays above ``(d_a + d_b − rate_p (t_b − t_a)) / 2``. Windows of
+    ``LOOKAHEAD`` are certified with that two-sided bound and halved until every pair passes; an evaluated
+    clearance within ``MIN_CERTIFIED`` of ``floor`` is a failure.
+
     Args:
         world: The collision world.
         trajectory: Joints matched by name to the robot.
@@ -101,28 +108,47 @@ def verify_trajectory(
     speeds[:, index] = max_abs_derivative(trajectory, 1)  # exact peak |q̇| per piece and joint [rad/s]
     times = trajectory.times
     base = robot.home.copy() if hold is None else np.asarray(hold, dtype=float).copy()
-    t = float(times[0])
-    end = float(times[-1])
-    lowest, pair, when = math.inf, ("", ""), t
+    lowest, pair, when = math.inf, ("", ""), float(times[0])
     evaluations = 0
-    while True:
+
+    def evaluate(t: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        nonlocal lowest, pair, when, evaluations
         q = base.copy()
         q[index] = trajectory(t)
         distances = world.distances(q, jacobian=False, bound_beyond=BOUND_BEYOND)
-        d, p = distances.closest()
         evaluations += 1
+        d, p = distances.closest()
         if d < lowest:
             lowest, pair, when = d, p, t
-        if d - floor < MIN_CERTIFIED:
+        assert distances.travel is not None
+        return distances.distance, distances.travel, d - floor >= MIN_CERTIFIED
+
+    def peak(t_a: float, t_b: float) -> np.ndarray:
+        lo = max(int(np.searchsorted(times, t_a, side="right")) - 1, 0)
+        hi = int(np.searchsorted(times, t_b, side="left"))
+        return speeds[lo : max(hi, lo + 1)].max(axis=0)
+
+    start, end = float(times[0]), float(times[-1])
+    grid = np.append(np.arange(start, end, LOOKAHEAD), end)
+    d_a, travel, ok = evaluate(start)
+    if not ok:
+        return Verification(False, lowest, pair, when, evaluations)
+    for t_a, t_b in zip(grid[:-1], grid[1:], strict=True):
+        d_b, _, ok = evaluate(float(t_b))
+        if not ok:
             return Verification(False, lowest, pair, when, evaluations)
-        if t >= end:
-            return Verification(True, lowest, pair, when, evaluations)
-        lo = max(int(np.searchsorted(times, t, side="right")) - 1, 0)
-        hi = int(np.searchsorted(times, t + LOOKAHEAD, side="right"))
-        peak = speeds[lo : max(hi, lo + 1)].max(axis=0)  # over the pieces the next step may reach
-        rate = distances.travel @ peak  # per pair: how fast its distance can shrink [m/s]
-        moving = rate > 0
-        step = LOOKAHEAD
-        if np.any(moving):
-            step = min(LOOKAHEAD, 0.9 * float(np.min((distances.distance[moving] - floor) / rate[moving])))
-        t = min(end, t + step)
+        pending = [(float(t_a), d_a, float(t_b), d_b)]
+        while pending:  # depth first, earliest interval first
+            a, da, b, db = pending.pop()
+            rate = travel @ peak(a, b)
+            if np.all((da + db - rate * (b - a)) / 2 - floor > 0.0):
+                continue
+            if b - a < MIN_INTERVAL:
+                return Verification(False, lowest, pair, when, evaluations)
+            m = (a + b) / 2
+            dm, _, ok = evaluate(m)
+            if not ok:
+                return Verification(False, lowest, pair, when, evaluations)
+            pending += [(m, dm, b, db), (a, da, m, dm)]
+        d_a = d_b
+    return Verification(True, lowest, pair, when, evaluations)
