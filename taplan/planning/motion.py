@@ -239,7 +239,7 @@ def plan_motion(
     *,
     world: CollisionWorld | None = None,
     margin: float = DEFAULT_MARGIN,
-    max_deviation: float = 0.01,
+    max_deviation: float = 0.05,
     max_time: float = 10.0,
     stages: tuple[str, ...] = STAGES,
     ik_seeds: int = 6,
@@ -255,7 +255,8 @@ def plan_motion(
         limits: Joint limits (default ``robot.planning_limits``).
         world: A ready :class:`~taplan.scene.CollisionWorld` (its scene is used instead of ``scene``).
         margin: Clearance [m] of the path's configurations; the timed trajectory is certified to keep a quarter.
-        max_deviation: Largest corner cut of the jerk-limited timing at interior waypoints [rad].
+        max_deviation: Largest corner cut of the jerk-limited timing at interior waypoints [rad] (the first timing;
+            when its verification fails the retries cut a fifth of it, then follow the waypoints exactly).
         max_time: Time budget of the path search (optimisation and sampling) [s].
         stages: Path stages to try, in this order: any of ``"straight"``, ``"optimization"``, ``"rrt-connect"``.
         ik_seeds: Random seeds of the goal IK beyond the start and home.
@@ -311,17 +312,21 @@ def plan_motion(
     attempts = 0
     # a straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA,
     # denser and finally through the exact waypoints when the verification asks for more accuracy
-    plans = ([None] if len(path) == 2 else []) + [DENSIFY_STEP, DENSIFY_STEP / 2, DENSIFY_STEP / 4]
-    for attempt, step in enumerate(plans):
+    plans: list[tuple[float, float] | None] = [None] if len(path) == 2 else []
+    plans += [(DENSIFY_STEP, max_deviation), (DENSIFY_STEP / 2, max_deviation / 5), (DENSIFY_STEP / 4, 0.0)]
+    for attempt, plan in enumerate(plans):
         attempts = attempt + 1
         clock = time.perf_counter()
         try:
-            if step is None:
+            if plan is None:
                 part = straight_line(path[0][active], path[1][active], sub)
             else:
-                dense = _densify(path, step)
-                method = "path" if attempt == len(plans) - 1 else "joint"
-                part = jerk_limited(dense[:, active], sub, method=method, max_deviation=max_deviation).trajectory
+                step, deviation = plan
+                dense = _densify(path, step)[:, active]
+                if deviation > 0:
+                    part = jerk_limited(dense, sub, method="joint", max_deviation=deviation).trajectory
+                else:
+                    part = jerk_limited(dense, sub, method="path").trajectory
         except TimingError as exc:
             timing_error = exc
             timing_time += time.perf_counter() - clock
