@@ -243,3 +243,23 @@ def test_point_travel_bound_is_an_upper_bound(robot) -> None:
         after = [world.data.oMi[b.joint].act(b.end) for b in world.bodies]
         travel = max(np.linalg.norm(a - b) for a, b in zip(before, after, strict=True))
         assert travel <= world.max_point_speed_bound(q, q + dq) + 1e-12
+
+
+def test_batched_distances_match_one_at_a_time(robot) -> None:
+    """distances_many is the same computation as distances, configuration by configuration (to 1e-12)."""
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.45], [0, 0, 0, 1]))
+    scene.add("ball", Sphere(0.05), ([0.4, -0.2, -0.2], [0, 0, 0, 1]))
+    scene.add("floor", HalfSpace(), ([0.0, 0.0, -1.0], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    limits = robot.planning_limits
+    rng = np.random.default_rng(11)
+    Q = limits.lower + rng.uniform(0, 1, (12, robot.nq)) * (limits.upper - limits.lower)
+    for cutoff in (0.05, np.inf):
+        for q, batched in zip(Q, world.distances_many(Q, cutoff=cutoff), strict=True):
+            single = world.distances(q, cutoff=cutoff)
+            assert batched.pairs == single.pairs
+            for field in ("distance", "point_a", "point_b", "normal", "jacobian", "travel"):
+                np.testing.assert_allclose(getattr(batched, field), getattr(single, field), atol=1e-12)
+    with pytest.raises(InvalidInputError, match="configurations"):
+        world.distances_many(Q[:, :5], cutoff=0.05)

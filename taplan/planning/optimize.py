@@ -91,12 +91,11 @@ def _evaluate(
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per evaluation point (waypoints 1..K-2, then the K-1 midpoints): (distances, Jacobian rows over active)."""
     K = len(path)
-    points = [path[k] for k in range(1, K - 1)] + [(path[k] + path[k + 1]) / 2 for k in range(K - 1)]
+    points = np.concatenate([path[1 : K - 1], (path[:-1] + path[1:]) / 2])
+    configurations = np.repeat(full[None, :], len(points), axis=0)
+    configurations[:, active] = points
     out = []
-    for p in points:
-        q = full.copy()
-        q[active] = p
-        d = world.distances(q, cutoff=cutoff)
+    for d in world.distances_many(configurations, cutoff=cutoff):
         assert d.jacobian is not None and d.travel is not None
         movable = d.travel[:, active].any(axis=1)  # pairs the moving joints cannot change stay as they are
         out.append((d.distance[movable], d.jacobian[movable][:, active]))

@@ -25,6 +25,7 @@ __all__ = ["SegmentCheck", "check_segment", "verify_trajectory", "Verification"]
 
 MIN_CERTIFIED = 1e-4  # [m] below this clearance a step would be too small to certify: report a failure
 LOOKAHEAD = 0.1  # [s] window over which the peak joint speeds bound a trajectory step
+MIN_FRACTION = 1e-9  # a segment interval this short that still cannot be certified is a failure
 MIN_INTERVAL = 1e-6  # [s] a trajectory interval this short that still cannot be certified is a failure
 BOUND_BEYOND = 0.1  # [m] pairs whose bounding spheres are farther apart use that gap (a lower bound): no coal query
 
@@ -41,29 +42,46 @@ class SegmentCheck:
 
 def check_segment(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margin: float) -> SegmentCheck:
     """Certify that the straight joint-space segment keeps at least ``margin / 2`` [m] everywhere and ``margin`` at
-    the evaluated points; invalid as soon as an evaluated configuration is closer than ``margin``."""
+    the evaluated points; invalid as soon as an evaluated configuration is closer than ``margin``.
+
+    Per pair, the distance changes by at most ``travel_p · |Δq|`` over the segment, so on ``[s_a, s_b]`` it stays
+    above ``(d_a + d_b − rate_p (s_b − s_a)) / 2`` with ``rate_p = travel_p · |q_b − q_a|``: intervals are halved
+    until that bound is at least ``margin / 2`` for every pair.
+    """
     step = np.abs(q_b - q_a)
-    s = 0.0
     lowest, lowest_pair = math.inf, ("", "")
     evaluations = 0
     floor = margin / 2
-    while True:
-        q = q_a + s * (q_b - q_a)
-        distances = world.distances(q, jacobian=False, bound_beyond=BOUND_BEYOND)
+
+    def evaluate(s: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        nonlocal lowest, lowest_pair, evaluations
+        distances = world.distances(q_a + s * (q_b - q_a), jacobian=False, bound_beyond=BOUND_BEYOND)
         d, pair = distances.closest()
         evaluations += 1
         if d < lowest:
             lowest, lowest_pair = d, pair
-        if d < margin:
+        assert distances.travel is not None
+        return distances.distance, distances.travel @ step, d >= margin
+
+    d_a, rate, ok = evaluate(0.0)
+    if not ok:
+        return SegmentCheck(False, lowest, lowest_pair, evaluations)
+    if not np.any(rate > 0):
+        return SegmentCheck(True, lowest, lowest_pair, evaluations)
+    d_b, _, ok = evaluate(1.0)
+    if not ok:
+        return SegmentCheck(False, lowest, lowest_pair, evaluations)
+    pending = [(0.0, d_a, 1.0, d_b)]
+    while pending:  # depth first, nearest the start first
+        a, da, b, db = pending.pop()
+        if np.all((da + db - rate * (b - a)) / 2 >= floor):
+            continue
+        m = (a + b) / 2
+        dm, _, ok = evaluate(m)
+        if not ok or b - a < MIN_FRACTION:
             return SegmentCheck(False, lowest, lowest_pair, evaluations)
-        if s >= 1.0:
-            return SegmentCheck(True, lowest, lowest_pair, evaluations)
-        # per pair: its distance changes by at most travel @ |Δq| over the whole segment
-        rate = distances.travel @ step
-        moving = rate > 0
-        if not np.any(moving):
-            return SegmentCheck(True, lowest, lowest_pair, evaluations)
-        s = min(1.0, s + float(np.min((distances.distance[moving] - floor) / rate[moving])))
+        pending += [(m, dm, b, db), (a, da, m, dm)]
+    return SegmentCheck(True, lowest, lowest_pair, evaluations)
 
 
 @dataclass(frozen=True)

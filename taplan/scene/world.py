@@ -14,6 +14,7 @@ carried by their links is ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))``, with the
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -162,6 +163,14 @@ class CollisionWorld:
         self._self_names = [(self.bodies[i].name, self.bodies[j].name) for i, j in self.self_pairs]
         # bodies fixed to the root never move relative to an obstacle: a plan cannot change those distances
         self._movers = np.array([k for k, b in enumerate(self.bodies) if b.joint != 0], dtype=int)
+        # per joint: the velocity columns of the joints that move it (its chain), for WORLD-frame Jacobians
+        self._support = np.zeros((self.model.njoints, self.model.nv))
+        for j in range(1, self.model.njoints):
+            for k in self.model.supports[j]:
+                if k > 0:
+                    self._support[
+                        j, self.model.joints[k].idx_v : self.model.joints[k].idx_v + self.model.joints[k].nv
+                    ] = 1
         self._body_geometry = []
         for b in self.bodies:
             length = float(np.linalg.norm(b.end - b.start))
@@ -270,6 +279,97 @@ class CollisionWorld:
         J = self._jacobian_rows(owner_a, owner_b, point_a, point_b, normal) if jacobian else None
         return Distances(names, distance, point_a, point_b, normal, J, travel)
 
+    def distances_many(self, configurations: npt.ArrayLike, *, cutoff: float) -> list[Distances]:
+        """:meth:`distances` (with Jacobians, exact) at several configurations (N, nq) in one batch: the same
+        pairs and numbers, with the closed-form parts vectorised over the configurations. Scenes with attached
+        objects are evaluated one configuration at a time."""
+        Q = np.asarray(configurations, dtype=float)
+        if Q.ndim != 2 or Q.shape[1] != self.model.nq:
+            raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
+        self._refresh()
+        if self._attached_items() or not np.all(np.isfinite(Q)):
+            return [self.distances(q, cutoff=cutoff) for q in Q]
+        model, data = self.model, self.data
+        joints = self._body_joint.tolist()
+        N, B = len(Q), len(self.bodies)
+        rotation = np.empty((N, B, 3, 3))
+        origin = np.empty((N, B, 3))
+        jacobians = np.empty((N, 6, model.nv))
+        for n, q in enumerate(Q):
+            pin.computeJointJacobians(model, data, q)  # WORLD-frame columns of every joint in data.J
+            rotation[n] = [data.oMi[j].rotation for j in joints]
+            origin[n] = [data.oMi[j].translation for j in joints]
+            jacobians[n] = data.J
+        starts = np.einsum("nbij,bj->nbi", rotation, self._body_start) + origin
+        ends = np.einsum("nbij,bj->nbi", rotation, self._body_end) + origin
+        empty = ([], np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=int),
+                 np.zeros(0, dtype=int), np.zeros((0, model.nv)))  # fmt: skip
+        pieces: list[list[tuple]] = [[empty] for _ in range(N)]  # per configuration: (names, d, pa, pb, n, a, b, rows)
+        if self.self_pairs:
+            i_idx, j_idx = self._self_index
+            S = len(i_idx)
+            pa, pb = _closest_points(
+                starts[:, i_idx].reshape(-1, 3),
+                ends[:, i_idx].reshape(-1, 3),
+                starts[:, j_idx].reshape(-1, 3),
+                ends[:, j_idx].reshape(-1, 3),
+            )
+            delta = pa - pb
+            norm = np.linalg.norm(delta, axis=1)
+            d = (norm - np.tile(self._radius[i_idx] + self._radius[j_idx], N)).reshape(N, S)
+            normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+            normal = normal.reshape(N, S, 3)
+            pa = pa.reshape(N, S, 3) - self._radius[i_idx][None, :, None] * normal
+            pb = pb.reshape(N, S, 3) + self._radius[j_idx][None, :, None] * normal
+            travel = self._body_reach[i_idx] + self._body_reach[j_idx]
+            for n in range(N):
+                keep = np.flatnonzero(d[n] <= cutoff)
+                pieces[n].append(
+                    (
+                        [self._self_names[k] for k in keep],
+                        d[n, keep],
+                        pa[n, keep],
+                        pb[n, keep],
+                        normal[n, keep],
+                        self._body_joint[i_idx[keep]],
+                        self._body_joint[j_idx[keep]],
+                        travel[keep],
+                    )
+                )
+        if self._items:
+            for n in range(N):
+                transforms: dict[int, Any] = {}
+
+                def transform(body: int, n: int = n, transforms: dict[int, Any] = transforms) -> Any:
+                    if body not in transforms:
+                        T = np.eye(4)
+                        T[:3, :3], T[:3, 3] = rotation[n, body], origin[n, body]
+                        T = T @ self._body_geometry[body][1]
+                        transforms[body] = self._coal.Transform3s(T[:3, :3], T[:3, 3])
+                    return transforms[body]
+
+                part = self._obstacle_distances(starts[n], ends[n], cutoff, math.inf, transform)
+                pieces[n].append(
+                    (part.names, part.distance, part.point_a, part.point_b, part.normal, part.owner_a,
+                     part.owner_b, part.travel)
+                )  # fmt: skip
+        out = []
+        for n in range(N):
+            names = tuple(name for piece in pieces[n] for name in piece[0])
+            columns = [np.concatenate([piece[k] for piece in pieces[n]]) for k in range(1, 8)]
+            distance, point_a, point_b, normal, owner_a, owner_b, travel = columns
+            count = len(names)
+            point_a, point_b, normal = (x.reshape(count, 3) for x in (point_a, point_b, normal))
+            J = jacobians[n]
+            rows = np.zeros((count, model.nv))
+            for owner, point, sign in ((owner_a.astype(int), point_a, 1.0), (owner_b.astype(int), point_b, -1.0)):
+                moving = owner > 0
+                if np.any(moving):
+                    row = normal[moving] @ J[:3] + np.cross(point[moving], normal[moving]) @ J[3:]
+                    rows[moving] += sign * row * self._support[owner[moving]]
+            out.append(Distances(names, distance, point_a, point_b, normal, rows, travel.reshape(count, model.nv)))
+        return out
+
     def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> _Pairs:
         """Robot body pairs (capsules) in closed form."""
         i_idx, j_idx = self._self_index
@@ -292,7 +392,14 @@ class CollisionWorld:
             self._body_reach[i] + self._body_reach[j],
         )
 
-    def _obstacle_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float) -> _Pairs:
+    def _obstacle_distances(
+        self,
+        starts: np.ndarray,
+        ends: np.ndarray,
+        cutoff: float,
+        bound_beyond: float,
+        transform: Callable[[int], Any] | None = None,
+    ) -> _Pairs:
         """Moving robot bodies vs static obstacles: half-spaces in closed form, others bounded by their bounding
         spheres and queried with coal when that bound is within ``bound_beyond``. Item-major order."""
         movers = self._movers
@@ -338,9 +445,9 @@ class CollisionWorld:
             for s_row, b_col in zip(*np.nonzero((gap <= cutoff) & (gap <= bound_beyond)), strict=True):
                 item, body = items[solid[s_row]], int(movers[b_col])
                 if body not in transforms:
-                    transforms[body] = self._body_transform(body)
-                geometry, transform = self._body_geometry[body][0], transforms[body]
-                d_k, pa_k, pb_k, n_k = self._pair(item.geometry, item.transform, geometry, transform)
+                    transforms[body] = self._body_transform(body) if transform is None else transform(body)
+                geometry, placement = self._body_geometry[body][0], transforms[body]
+                d_k, pa_k, pb_k, n_k = self._pair(item.geometry, item.transform, geometry, placement)
                 m = solid[s_row]
                 d[m, b_col], pa[m, b_col], pb[m, b_col], n[m, b_col] = d_k, pa_k, pb_k, n_k
         rows, cols = np.nonzero(d <= cutoff)
