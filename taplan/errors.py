@@ -106,11 +106,19 @@ class CollisionError(TaplanError):
         clearance: The clearance that was required [m].
     """
 
-    def __init__(self, argument: str, pair: tuple[str, str], depth: float, detail: str = "") -> None:
+    def __init__(self, argument: str, pair: tuple[str, str], depth: float, clearance: float = 0.0) -> None:
         self.argument = argument
         self.pair = tuple(pair)
         self.depth = float(depth)
-        super().__init__(f"{argument}: {pair[0]} collides with {pair[1]} (penetration {depth * 1e3:.1f} mm){detail}")
+        self.clearance = float(clearance)
+        if self.depth >= 0.0:
+            text = f"{pair[0]} collides with {pair[1]} (penetration {self.depth * 1e3:.1f} mm)"
+        else:
+            text = (
+                f"{pair[0]} is {-self.depth * 1e3:.1f} mm from {pair[1]}, inside the required clearance of "
+                f"{self.clearance * 1e3:.1f} mm"
+            )
+        super().__init__(f"{argument}: {text}")
 
 
 class PlanningError(TaplanError):

@@ -171,6 +171,19 @@ def test_penetration_is_negative_and_named_in_mm(robot) -> None:
         world.check_configuration(q, "start")
     assert info.value.depth == pytest.approx(-d)
     assert info.value.argument == "start"
+    apart = Scene()  # a few mm inside a 10 mm clearance: named as a distance, not as a penetration
+    apart.add("block", Box((0.1, 0.1, 0.1)), (hand.tolist(), [0, 0, 0, 1]))
+    clear_world = CollisionWorld(robot, apart)
+    for lift in np.arange(0.0, 0.3, 0.001):  # [m] raise the block until it is 3-9 mm away
+        apart.move("block", ((hand + [0.0, 0.0, lift]).tolist(), [0, 0, 0, 1]))
+        d, pair = clear_world.min_distance(q)
+        if 0.003 < d < 0.009 and "block" in pair:
+            break
+    assert 0.003 < d < 0.009 and "block" in pair  # [m]
+    pattern = rf"start: .* is {d * 1e3:.1f} mm from block, inside the required clearance of 10\.0 mm$"
+    with pytest.raises(CollisionError, match=pattern) as info:
+        clear_world.check_configuration(q, "start", margin=0.01)
+    assert info.value.depth == pytest.approx(-d) and info.value.clearance == pytest.approx(0.01)
 
 
 def test_jacobians_match_finite_differences(robot) -> None:
@@ -263,3 +276,28 @@ def test_batched_distances_match_one_at_a_time(robot) -> None:
                 np.testing.assert_allclose(getattr(batched, field), getattr(single, field), atol=1e-12)
     with pytest.raises(InvalidInputError, match="configurations"):
         world.distances_many(Q[:, :5], cutoff=0.05)
+
+
+def _cube_mesh(edge: float) -> Mesh:
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float) * edge / 2
+    faces = [
+        [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+        [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],
+    ]  # fmt: skip
+    return Mesh(corners, np.array(faces))
+
+
+def test_mesh_obstacle_matches_the_same_box(robot) -> None:
+    """A triangle-mesh cube and a Box of the same size and pose give the same separations (coal BVH vs GJK)."""
+    hand = robot.frame_pose(robot.home, "left_ee")[:3, 3]
+    pose = ((hand + [0.0, 0.0, -0.2]).tolist(), [0, 0, 0.3826834, 0.9238795])  # 45° about z
+    as_mesh, as_box = Scene(), Scene()
+    as_mesh.add("cube", _cube_mesh(0.1), pose)
+    as_box.add("cube", Box((0.1, 0.1, 0.1)), pose)
+    meshes, boxes = CollisionWorld(robot, as_mesh), CollisionWorld(robot, as_box)
+    for q in _random_states(robot, 6, 5):
+        a, b = meshes.distances(q), boxes.distances(q)
+        assert a.pairs == b.pairs
+        apart = b.distance > 1e-4
+        np.testing.assert_allclose(a.distance[apart], b.distance[apart], atol=1e-6)  # [m]
+    assert meshes.min_distance(robot.home)[1] == boxes.min_distance(robot.home)[1]

@@ -178,7 +178,8 @@ class Mesh(Shape):
 
         model = coal.BVHModelOBBRSS()
         model.beginModel(len(self.faces), len(self.vertices))
-        model.addSubModel(self.vertices, self.faces)
+        model.addVertices(self.vertices)
+        model.addTriangles(self.faces)
         model.endModel()
         return model
 
