@@ -144,12 +144,13 @@ def optimize_path(
     x_path = resample(seed, int(np.clip(np.ceil(length / SEGMENT_STEP) + 1, 5, 40)))
     iterations = 0
     for _ in range(REFINEMENTS + 1):
-        x_path, used = _sequential_convex(
+        optimized, used = _sequential_convex(
             world, full, x_path, active, lower, upper, margin, max_iterations - iterations, deadline, solver
         )
         iterations += used
-        if x_path is None:
+        if optimized is None:
             return None
+        x_path = optimized
         configurations = np.repeat(full[None, :], len(x_path), axis=0)
         configurations[:, active] = x_path
         checks = [

@@ -94,7 +94,7 @@ class _PairList:
 
     def freeze(self) -> _Pairs:
         count = len(self.rows)
-        column = list(zip(*self.rows, strict=True)) if count else [[] for _ in range(8)]
+        column: list[Any] = list(zip(*self.rows, strict=True)) if count else [[] for _ in range(8)]
         return _Pairs(
             list(column[0]),
             np.array(column[1], dtype=float),
@@ -121,6 +121,8 @@ class _Item:
         self.radius = shape.bounding_radius()
         self.halfspace = isinstance(shape, HalfSpace)
         self.transform = coal.Transform3s(pose[:3, :3], pose[:3, 3])
+        self.center = pose[:3, 3]  # where it is now [m], root frame (attached: updated per configuration)
+        self.reach = np.zeros(0)  # attached objects: per joint, how far it can be from the joint [m]
 
 
 class CollisionWorld:
@@ -302,8 +304,10 @@ class CollisionWorld:
             jacobians[n] = data.J
         starts = np.einsum("nbij,bj->nbi", rotation, self._body_start) + origin
         ends = np.einsum("nbij,bj->nbi", rotation, self._body_end) + origin
-        empty = ([], np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=int),
-                 np.zeros(0, dtype=int), np.zeros((0, model.nv)))  # fmt: skip
+        no_points = np.zeros((0, 3))
+        no_joints = np.zeros(0, dtype=int)
+        empty: tuple[Any, ...] = ([], np.zeros(0), no_points, no_points, no_points, no_joints, no_joints,
+                                  np.zeros((0, model.nv)))  # fmt: skip
         pieces: list[list[tuple]] = [[empty] for _ in range(N)]  # per configuration: (names, d, pa, pb, n, a, b, rows)
         if self.self_pairs:
             i_idx, j_idx = self._self_index
@@ -452,16 +456,16 @@ class CollisionWorld:
                 d[m, b_col], pa[m, b_col], pb[m, b_col], n[m, b_col] = d_k, pa_k, pb_k, n_k
         rows, cols = np.nonzero(d <= cutoff)
         names = [(self.bodies[movers[c]].name, items[r].name) for r, c in zip(rows, cols, strict=True)]
-        body = movers[cols]
+        paired = movers[cols]
         part = _Pairs(
             names,
             d[rows, cols],
             pa[rows, cols],
             pb[rows, cols],
             n[rows, cols],
-            self._body_joint[body],
+            self._body_joint[paired],
             np.zeros(len(rows), dtype=int),
-            self._body_reach[body],
+            self._body_reach[paired],
         )
         return part
 
