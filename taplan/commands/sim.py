@@ -20,6 +20,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=100.0, help="joint_states / current_ee_pose rate [Hz] (100)")
     parser.add_argument("--motion-rate", type=float, default=100.0, help="motion model rate [Hz] (100, the robot's)")
     parser.add_argument(
+        "--motion",
+        choices=("joint", "interpolate"),
+        default="joint",
+        help="motion model: joint (move to the latest command at the velocity ceiling, the robot's joint mode) or "
+        "interpolate (the seed simulator's linear interpolation between streamed commands)",
+    )
+    parser.add_argument(
         "--stall-after", type=float, default=None, help="fault injection: stop joint_states after this many seconds"
     )
 
@@ -32,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
         state_rate=check_rate(args.rate, "--rate"),
         motion_rate=check_rate(args.motion_rate, "--motion-rate"),
         stall_after=args.stall_after,
+        motion=args.motion,
     )
     interface, bag = open_transport(args)
     robot = Robot.teleavatar()

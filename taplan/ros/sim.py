@@ -13,8 +13,12 @@ It plays the robot's API mode: subscribes ``/api/{side}_arm/joint_cmd``, ``/api/
 * **Commands.** Exactly 7 finite positions; names empty (index order) or exactly the arm's 7 names in any order.
   Anything else is rejected with a log line (and counted in ``rejected``). Targets are clipped to the hardware
   limits, as the robot does. Commands while paused are ignored.
-* **Motion.** The joint-mode model of :class:`taplan.reference.JointModeRobot`: each 10 ms tick the arm moves to the
-  latest target, at most the velocity ceiling times the tick.
+* **Motion.** ``motion="joint"`` (default): the joint-mode model of :class:`taplan.reference.JointModeRobot`: each
+  10 ms tick the arm moves to the latest target, at most the velocity ceiling times the tick.
+  ``motion="interpolate"``: the seed simulator's linear branch applied to a command stream (each ``joint_cmd`` is a
+  positions-only waypoint, reached along the straight line from where the arm is over the interval since the
+  previous command, clamped to [one motion tick, ``max_segment``]), the velocity ceiling still applying; with
+  ``state_rate=10`` it publishes like the seed. A plan whose velocities jump shows the same steps here.
 * **Gripper.** Commands in [0, 1]; others are rejected.
 
 Fault injection for tests: ``stall_after`` stops the joint_states after that time, as a frozen driver would.
@@ -65,6 +69,8 @@ class SimConfig:
         ready_tolerance: Largest |q - target| to become READY [rad].
         ready_cycles: Consecutive FSM checks within tolerance to become READY.
         stall_after: Stop publishing joint states after this time [s] (fault injection), or None.
+        motion: Motion model, ``"joint"`` or ``"interpolate"`` (see the module notes).
+        max_segment: Longest interpolation segment of ``"interpolate"`` [s] (a command after a pause).
     """
 
     state_rate: float = 100.0
@@ -75,6 +81,11 @@ class SimConfig:
     ready_tolerance: float = 0.08
     ready_cycles: int = 5
     stall_after: float | None = None
+    motion: str = "joint"
+    max_segment: float = 0.1
+
+
+MOTIONS = ("joint", "interpolate")
 
 
 class _Every:
@@ -113,6 +124,10 @@ class SimulatedRobot:
         self.interface = interface
         self.robot = robot
         self.config = config or SimConfig()
+        if self.config.motion not in MOTIONS:
+            raise InvalidInputError("config.motion", self.config.motion, f"one of {MOTIONS}")
+        if not (math.isfinite(self.config.max_segment) and self.config.max_segment > 0):
+            raise InvalidInputError("config.max_segment", self.config.max_segment, "a duration > 0 [s]")
         self.q = robot.home.copy() if initial is None else robot.check_configuration(initial, "initial").copy()
         self.v = np.zeros_like(self.q)
         self.target = self.q.copy()
@@ -128,6 +143,9 @@ class SimulatedRobot:
         self.indices = {side: robot.indices(api.ARM_JOINT_NAMES[side]) for side in api.SIDES}
         self.started: float | None = None
         self._last_motion: float | None = None
+        # "interpolate": per arm, (segment start positions, start time, duration), and the last command's time
+        self._segments: dict[str, tuple[np.ndarray, float, float]] = {}
+        self._last_command: dict[str, float] = {}
         self._state_timer = _Every(self.config.state_rate)
         self._fsm_timer = _Every(self.config.fsm_rate)
         self._motion_timer = _Every(self.config.motion_rate)
@@ -177,6 +195,12 @@ class SimulatedRobot:
         index = self.indices[side]
         self.target[index] = np.clip(q, self.lower[index], self.upper[index])
         self.commanded[side] = True
+        if self.config.motion == "interpolate":
+            now = self.interface.now()
+            tick = 1.0 / self.config.motion_rate
+            since = now - self._last_command.get(side, -math.inf)
+            self._segments[side] = (self.q[index].copy(), now, min(max(since, tick), self.config.max_segment))
+            self._last_command[side] = now
 
     def on_enable(self, fields: dict[str, Any]) -> None:
         """``/api/fsm/enable``: heartbeat (> 0), pause (<= 0); non-finite values are ignored."""
@@ -192,6 +216,7 @@ class SimulatedRobot:
         self.last_enable = now
         if self.fsm == FsmState.PAUSE:
             self.target = self.q.copy()
+            self._segments.clear()
             self.commanded = dict.fromkeys(api.SIDES, False)
             self.ready_count = 0
             self._enter(FsmState.SLOW_START, now, "enabled")
@@ -209,6 +234,7 @@ class SimulatedRobot:
             if state == FsmState.PAUSE:
                 self.target = self.q.copy()
                 self.v[:] = 0.0
+                self._segments.clear()
             logger.info("fsm %s -> %s (%s)", self.fsm.name, state.name, reason)
             self.fsm = state
             self.transitions.append((now, state, reason))
@@ -261,7 +287,12 @@ class SimulatedRobot:
             self.v[:] = 0.0
             return
         cap = self.speed if self.fsm == FsmState.READY else np.full_like(self.q, self.config.slow_start_speed)
-        step = np.clip(self.target - self.q, -cap * dt, cap * dt)
+        desired = self.target.copy()
+        for side, (start, t0, duration) in self._segments.items():
+            index = self.indices[side]
+            fraction = min(1.0, max(0.0, (now - t0) / duration))
+            desired[index] = start + fraction * (self.target[index] - start)
+        step = np.clip(desired - self.q, -cap * dt, cap * dt)
         self.q = self.q + step
         self.v = step / dt
 
