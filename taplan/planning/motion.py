@@ -353,7 +353,7 @@ def plan_motion(
         success=True,
         stage=stage,
         stage_times=times,
-        path_length=float(np.linalg.norm(np.diff(geometric, axis=0), axis=1).sum()),
+        path_length=_length(geometric),
         duration=trajectory.duration,
         min_clearance=verification.min_clearance,
         min_clearance_pair=verification.pair,

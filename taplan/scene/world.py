@@ -249,7 +249,7 @@ class CollisionWorld:
         self._refresh()
         model, data = self.model, self.data
         if jacobian:
-            pin.computeJointJacobians(model, data, q)
+            pin.computeJointJacobians(model, data, q)  # WORLD-frame columns of every joint in data.J
         else:
             pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)
@@ -259,27 +259,12 @@ class CollisionWorld:
         ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
         parts: list[_Pairs] = []
         if self.self_pairs:
-            parts.append(self._self_distances(starts, ends, cutoff))
+            parts += self._self_distances(starts[None], ends[None], cutoff)
         if self._items:
             parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
         if self._attached_items():
             parts.append(self._attached_distances(starts, ends, cutoff))
-        names = tuple(name for part in parts for name in part.names)
-        count = len(names)
-        if count:
-            distance = np.concatenate([p.distance for p in parts])
-            point_a = np.concatenate([p.point_a for p in parts])
-            point_b = np.concatenate([p.point_b for p in parts])
-            normal = np.concatenate([p.normal for p in parts])
-            owner_a = np.concatenate([p.owner_a for p in parts])
-            owner_b = np.concatenate([p.owner_b for p in parts])
-            travel = np.concatenate([p.travel for p in parts])
-        else:
-            distance, owner_a, owner_b = np.zeros(0), np.zeros(0, dtype=int), np.zeros(0, dtype=int)
-            point_a, point_b, normal = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
-            travel = np.zeros((0, model.nv))
-        J = self._jacobian_rows(owner_a, owner_b, point_a, point_b, normal) if jacobian else None
-        return Distances(names, distance, point_a, point_b, normal, J, travel)
+        return self._joined(parts, data.J if jacobian else None)
 
     def distances_many(self, configurations: npt.ArrayLike, *, cutoff: float) -> list[Distances]:
         """:meth:`distances` (with Jacobians, exact) at several configurations (N, nq) in one batch: the same
@@ -298,103 +283,86 @@ class CollisionWorld:
         origin = np.empty((N, B, 3))
         jacobians = np.empty((N, 6, model.nv))
         for n, q in enumerate(Q):
-            pin.computeJointJacobians(model, data, q)  # WORLD-frame columns of every joint in data.J
+            pin.computeJointJacobians(model, data, q)
             rotation[n] = [data.oMi[j].rotation for j in joints]
             origin[n] = [data.oMi[j].translation for j in joints]
             jacobians[n] = data.J
         starts = np.einsum("nbij,bj->nbi", rotation, self._body_start) + origin
         ends = np.einsum("nbij,bj->nbi", rotation, self._body_end) + origin
-        no_points = np.zeros((0, 3))
-        no_joints = np.zeros(0, dtype=int)
-        empty: tuple[Any, ...] = ([], np.zeros(0), no_points, no_points, no_points, no_joints, no_joints,
-                                  np.zeros((0, model.nv)))  # fmt: skip
-        pieces: list[list[tuple]] = [[empty] for _ in range(N)]  # per configuration: (names, d, pa, pb, n, a, b, rows)
+        parts: list[list[_Pairs]] = [[] for _ in range(N)]
         if self.self_pairs:
-            i_idx, j_idx = self._self_index
-            S = len(i_idx)
-            pa, pb = _closest_points(
-                starts[:, i_idx].reshape(-1, 3),
-                ends[:, i_idx].reshape(-1, 3),
-                starts[:, j_idx].reshape(-1, 3),
-                ends[:, j_idx].reshape(-1, 3),
-            )
-            delta = pa - pb
-            norm = np.linalg.norm(delta, axis=1)
-            d = (norm - np.tile(self._radius[i_idx] + self._radius[j_idx], N)).reshape(N, S)
-            normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
-            normal = normal.reshape(N, S, 3)
-            pa = pa.reshape(N, S, 3) - self._radius[i_idx][None, :, None] * normal
-            pb = pb.reshape(N, S, 3) + self._radius[j_idx][None, :, None] * normal
-            travel = self._body_reach[i_idx] + self._body_reach[j_idx]
-            for n in range(N):
-                keep = np.flatnonzero(d[n] <= cutoff)
-                pieces[n].append(
-                    (
-                        [self._self_names[k] for k in keep],
-                        d[n, keep],
-                        pa[n, keep],
-                        pb[n, keep],
-                        normal[n, keep],
-                        self._body_joint[i_idx[keep]],
-                        self._body_joint[j_idx[keep]],
-                        travel[keep],
-                    )
-                )
-        if self._items:
-            for n in range(N):
-                transforms: dict[int, Any] = {}
+            for n, part in enumerate(self._self_distances(starts, ends, cutoff)):
+                parts[n].append(part)
+        for n in range(N) if self._items else ():
+            transforms: dict[int, Any] = {}
 
-                def transform(body: int, n: int = n, transforms: dict[int, Any] = transforms) -> Any:
-                    if body not in transforms:
-                        T = np.eye(4)
-                        T[:3, :3], T[:3, 3] = rotation[n, body], origin[n, body]
-                        T = T @ self._body_geometry[body][1]
-                        transforms[body] = self._coal.Transform3s(T[:3, :3], T[:3, 3])
-                    return transforms[body]
+            def transform(body: int, n: int = n, transforms: dict[int, Any] = transforms) -> Any:
+                if body not in transforms:
+                    transforms[body] = self._coal_placement(rotation[n, body], origin[n, body], body)
+                return transforms[body]
 
-                part = self._obstacle_distances(starts[n], ends[n], cutoff, math.inf, transform)
-                pieces[n].append(
-                    (part.names, part.distance, part.point_a, part.point_b, part.normal, part.owner_a,
-                     part.owner_b, part.travel)
-                )  # fmt: skip
-        out = []
-        for n in range(N):
-            names = tuple(name for piece in pieces[n] for name in piece[0])
-            columns = [np.concatenate([piece[k] for piece in pieces[n]]) for k in range(1, 8)]
-            distance, point_a, point_b, normal, owner_a, owner_b, travel = columns
-            count = len(names)
-            point_a, point_b, normal = (x.reshape(count, 3) for x in (point_a, point_b, normal))
-            J = jacobians[n]
-            rows = np.zeros((count, model.nv))
-            for owner, point, sign in ((owner_a.astype(int), point_a, 1.0), (owner_b.astype(int), point_b, -1.0)):
+            parts[n].append(self._obstacle_distances(starts[n], ends[n], cutoff, math.inf, transform))
+        return [self._joined(parts[n], jacobians[n]) for n in range(N)]
+
+    def _joined(self, parts: list[_Pairs], J: np.ndarray | None) -> Distances:
+        """One :class:`Distances` from the parts, with ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))`` from the WORLD-frame
+        joint Jacobians ``J`` (6, nv) of the configuration (a point's velocity is ``v + ω × p``), or None."""
+        nv = self.model.nv
+        names = tuple(name for part in parts for name in part.names)
+        count = len(names)
+
+        def column(field: str, shape: tuple[int, ...], dtype: type = float) -> np.ndarray:
+            values = [getattr(part, field) for part in parts]
+            return np.concatenate(values).reshape(count, *shape) if values else np.zeros((0, *shape), dtype=dtype)
+
+        distance, travel = column("distance", ()), column("travel", (nv,))
+        point_a, point_b, normal = (column(field, (3,)) for field in ("point_a", "point_b", "normal"))
+        rows = None
+        if J is not None:
+            rows = np.zeros((count, nv))
+            for field, point, sign in (("owner_a", point_a, 1.0), ("owner_b", point_b, -1.0)):
+                owner = column(field, (), int).astype(int)
                 moving = owner > 0
                 if np.any(moving):
-                    row = normal[moving] @ J[:3] + np.cross(point[moving], normal[moving]) @ J[3:]
+                    n = normal[moving]
+                    row = n @ J[:3] + np.cross(point[moving], n) @ J[3:]
                     rows[moving] += sign * row * self._support[owner[moving]]
-            out.append(Distances(names, distance, point_a, point_b, normal, rows, travel.reshape(count, model.nv)))
-        return out
+        return Distances(names, distance, point_a, point_b, normal, rows, travel)
 
-    def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> _Pairs:
-        """Robot body pairs (capsules) in closed form."""
+    def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> list[_Pairs]:
+        """Robot body pairs (capsules) in closed form, for N configurations (``starts``, ``ends``: (N, B, 3))."""
         i_idx, j_idx = self._self_index
-        pa, pb = _closest_points(starts[i_idx], ends[i_idx], starts[j_idx], ends[j_idx])
+        N, S = len(starts), len(i_idx)
+        pa, pb = _closest_points(
+            starts[:, i_idx].reshape(-1, 3),
+            ends[:, i_idx].reshape(-1, 3),
+            starts[:, j_idx].reshape(-1, 3),
+            ends[:, j_idx].reshape(-1, 3),
+        )
         delta = pa - pb
         norm = np.linalg.norm(delta, axis=1)
-        d = norm - self._radius[i_idx] - self._radius[j_idx]
-        n = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
-        keep = np.flatnonzero(d <= cutoff)
-        i, j = i_idx[keep], j_idx[keep]
-        n = n[keep]
-        return _Pairs(
-            [self._self_names[k] for k in keep],
-            d[keep],
-            pa[keep] - self._radius[i][:, None] * n,
-            pb[keep] + self._radius[j][:, None] * n,
-            n,
-            self._body_joint[i],
-            self._body_joint[j],
-            self._body_reach[i] + self._body_reach[j],
-        )
+        d = (norm - np.tile(self._radius[i_idx] + self._radius[j_idx], N)).reshape(N, S)
+        normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+        normal = normal.reshape(N, S, 3)
+        pa = pa.reshape(N, S, 3) - self._radius[i_idx][None, :, None] * normal
+        pb = pb.reshape(N, S, 3) + self._radius[j_idx][None, :, None] * normal
+        travel = self._body_reach[i_idx] + self._body_reach[j_idx]
+        out = []
+        for n in range(N):
+            keep = np.flatnonzero(d[n] <= cutoff)
+            out.append(
+                _Pairs(
+                    [self._self_names[k] for k in keep],
+                    d[n, keep],
+                    pa[n, keep],
+                    pb[n, keep],
+                    normal[n, keep],
+                    self._body_joint[i_idx[keep]],
+                    self._body_joint[j_idx[keep]],
+                    travel[keep],
+                )
+            )
+        return out
 
     def _obstacle_distances(
         self,
@@ -500,23 +468,6 @@ class CollisionWorld:
                 out.add((att.name, name), d, pa, pb, n, parent, joint, att.reach if row is None else att.reach + row)
         return out.freeze()
 
-    def _jacobian_rows(
-        self, owner_a: np.ndarray, owner_b: np.ndarray, point_a: np.ndarray, point_b: np.ndarray, normal: np.ndarray
-    ) -> np.ndarray:
-        """``n · (J_a(p_a) − J_b(p_b))`` per pair, with one pinocchio joint Jacobian per distinct joint."""
-        model, data = self.model, self.data
-        rows = np.zeros((len(owner_a), model.nv))
-        for owner, point, sign in ((owner_a, point_a, 1.0), (owner_b, point_b, -1.0)):
-            for joint in np.unique(owner):
-                if joint <= 0:
-                    continue
-                mask = owner == joint
-                J = pin.getJointJacobian(model, data, int(joint), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-                r = point[mask] - data.oMi[int(joint)].translation
-                n = normal[mask]
-                rows[mask] += sign * (n @ J[:3] + np.cross(r, n) @ J[3:])
-        return rows
-
     def _attached_items(self) -> list[_Item]:
         return getattr(self, "_attached", [])
 
@@ -525,7 +476,14 @@ class CollisionWorld:
         return [self._body_transform(k) for k in range(len(self.bodies))]
 
     def _body_transform(self, k: int) -> Any:
-        T = self.data.oMi[self.bodies[k].joint].homogeneous @ self._body_geometry[k][1]
+        placement = self.data.oMi[self.bodies[k].joint]
+        return self._coal_placement(placement.rotation, placement.translation, k)
+
+    def _coal_placement(self, rotation: np.ndarray, origin: np.ndarray, k: int) -> Any:
+        """Body ``k``'s coal transform when its joint is at (``rotation``, ``origin``) in the root frame."""
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = rotation, origin
+        T = T @ self._body_geometry[k][1]
         return self._coal.Transform3s(T[:3, :3], T[:3, 3])
 
     def _body_geometry_at(self, k: int, transforms: list[Any]) -> tuple[Any, Any]:
