@@ -13,7 +13,9 @@ interval is halved until the bound holds).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -71,17 +73,36 @@ def check_segment(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margi
     d_b, _, ok = evaluate(1.0)
     if not ok:
         return SegmentCheck(False, lowest, lowest_pair, evaluations)
-    pending = [(0.0, d_a, 1.0, d_b)]
-    while pending:  # depth first, nearest the start first
+    valid = _halve_until_certified(
+        (0.0, d_a, 1.0, d_b), evaluate, lambda a, b: rate, lambda lower: bool(np.all(lower >= floor)), MIN_FRACTION
+    )
+    return SegmentCheck(valid, lowest, lowest_pair, evaluations)
+
+
+def _halve_until_certified(
+    interval: tuple[float, np.ndarray, float, np.ndarray],
+    evaluate: Callable[[float], tuple[np.ndarray, Any, bool]],
+    rate: Callable[[float, float], np.ndarray],
+    clears: Callable[[np.ndarray], bool],
+    shortest: float,
+) -> bool:
+    """Certify ``interval`` ``(a, d_a, b, d_b)`` (per-pair distances at both ends): per pair the distance stays
+    above ``(d_a + d_b − rate(a, b) (b − a)) / 2`` on it; where ``clears`` refuses that bound, halve (evaluating
+    the middle) depth first, earliest part first. False when an evaluation fails or a part shorter than
+    ``shortest`` still does not clear."""
+    pending = [interval]
+    while pending:
         a, da, b, db = pending.pop()
-        if np.all((da + db - rate * (b - a)) / 2 >= floor):
+        if clears((da + db - rate(a, b) * (b - a)) / 2):
             continue
+        if b - a < shortest:
+            return False
         m = (a + b) / 2
         dm, _, ok = evaluate(m)
-        if not ok or b - a < MIN_FRACTION:
-            return SegmentCheck(False, lowest, lowest_pair, evaluations)
+        if not ok:
+            return False
         pending += [(m, dm, b, db), (a, da, m, dm)]
-    return SegmentCheck(True, lowest, lowest_pair, evaluations)
+    return True
 
 
 @dataclass(frozen=True)
@@ -155,18 +176,14 @@ def verify_trajectory(
         d_b, _, ok = evaluate(float(t_b))
         if not ok:
             return Verification(False, lowest, pair, when, evaluations)
-        pending = [(float(t_a), d_a, float(t_b), d_b)]
-        while pending:  # depth first, earliest interval first
-            a, da, b, db = pending.pop()
-            rate = travel @ peak(a, b)
-            if np.all((da + db - rate * (b - a)) / 2 - floor > 0.0):
-                continue
-            if b - a < MIN_INTERVAL:
-                return Verification(False, lowest, pair, when, evaluations)
-            m = (a + b) / 2
-            dm, _, ok = evaluate(m)
-            if not ok:
-                return Verification(False, lowest, pair, when, evaluations)
-            pending += [(m, dm, b, db), (a, da, m, dm)]
+        certified = _halve_until_certified(
+            (float(t_a), d_a, float(t_b), d_b),
+            evaluate,
+            lambda a, b: travel @ peak(a, b),
+            lambda lower: bool(np.all(lower > floor)),
+            MIN_INTERVAL,
+        )
+        if not certified:
+            return Verification(False, lowest, pair, when, evaluations)
         d_a = d_b
     return Verification(True, lowest, pair, when, evaluations)
