@@ -61,25 +61,15 @@ def dense_check(
 
 
 def toppra_defaults(robot: taplan.Robot, waypoints: np.ndarray, active: np.ndarray) -> Any:
-    """toppra with its defaults (velocity and acceleration limits, default gridpoints) on a spline through the
-    waypoints (K, len(active)); None when it fails."""
-    import toppra
-    import toppra.algorithm
-    import toppra.constraint
-
+    """toppra with its defaults (:func:`benchmarks.bench_timing.toppra_defaults`) on a spline through the waypoints
+    (K, len(active)) of the ``active`` joints; None when it fails."""
+    from benchmarks.bench_timing import toppra_defaults as timed
     from taplan.timing import Path
 
     sub = robot.planning_limits.subset([robot.joint_names[j] for j in active])
     if len(waypoints) == 2:
         waypoints = np.array([waypoints[0], (waypoints[0] + waypoints[1]) / 2, waypoints[1]])
-    instance = toppra.algorithm.TOPPRA(
-        [
-            toppra.constraint.JointVelocityConstraint(sub.velocity),
-            toppra.constraint.JointAccelerationConstraint(sub.acceleration),
-        ],
-        Path(waypoints),
-    )
-    return instance.compute_trajectory()
+    return timed(Path(waypoints), sub)
 
 
 def ompl_pipeline(world: CollisionWorld, robot: taplan.Robot, start: np.ndarray, goal: np.ndarray) -> dict[str, Any]:
