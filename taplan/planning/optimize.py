@@ -242,7 +242,10 @@ def _linearised(
 ) -> tuple[sp.csr_matrix, np.ndarray]:
     """Rows ``-J Δx - t ≤ d - target`` (without the slack column) as ``G x ≤ h``."""
     K, n = problem.K, problem.n
-    rows, cols, vals, h = [], [], [], []
+    rows: list[np.ndarray] = []
+    cols: list[np.ndarray] = []
+    vals: list[np.ndarray] = []
+    h: list[np.ndarray] = []
     r = 0
     for e, (d, J) in enumerate(evaluations):
         if e < K - 2:
@@ -250,17 +253,17 @@ def _linearised(
         else:
             k = e - (K - 2)  # midpoint of waypoints k, k + 1
             blocks = [(b - 1, 0.5) for b in (k, k + 1) if 1 <= b <= K - 2]
-        for p in range(len(d)):
-            if not np.any(J[p]):
-                continue  # a pair the moving joints cannot change
-            jx = 0.0
-            for block, weight in blocks:
-                columns = np.arange(block * n, (block + 1) * n)
-                rows += [r] * n
-                cols += columns.tolist()
-                vals += (-weight * J[p]).tolist()
-                jx += weight * float(J[p] @ x[columns])
-            h.append(d[p] - target - jx)
-            r += 1
-    G = sp.csr_matrix((vals, (rows, cols)), shape=(r, problem.N))
-    return G, np.array(h)
+        keep = np.any(J != 0.0, axis=1)  # pairs the moving joints cannot change give no row
+        Jk, m = J[keep], int(np.count_nonzero(keep))
+        jx = np.zeros(m)
+        for block, weight in blocks:
+            columns = np.arange(block * n, (block + 1) * n)
+            rows.append(np.repeat(np.arange(r, r + m), n))
+            cols.append(np.tile(columns, m))
+            vals.append((-weight * Jk).ravel())
+            jx += weight * (Jk @ x[columns])
+        h.append(d[keep] - target - jx)
+        r += m
+    row, col, val = (np.concatenate(v) if v else np.zeros(0) for v in (rows, cols, vals))
+    G = sp.csr_matrix((val, (row, col)), shape=(r, problem.N))
+    return G, np.concatenate(h) if h else np.zeros(0)
