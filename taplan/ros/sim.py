@@ -287,7 +287,7 @@ class SimulatedRobot:
             self.v[:] = 0.0
             return
         cap = self.speed if self.fsm == FsmState.READY else np.full_like(self.q, self.config.slow_start_speed)
-        desired = self.target.copy()
+        desired = self.target.copy() if self._segments else self.target
         for side, (start, t0, duration) in self._segments.items():
             index = self.indices[side]
             fraction = min(1.0, max(0.0, (now - t0) / duration))
