@@ -107,7 +107,7 @@ def test_retime_save_load_round_trip(arm_limits: taplan.JointLimits, tmp_path) -
     [
         ([[0.0] * 7, [np.nan] * 7], "finite"),
         ([[0.0] * 7], "at least 2"),
-        ([[0.0] * 7, [0.1] * 7, [0.1] * 7], "equal"),
+        ([[0.1] * 7, [0.1] * 7, [0.1] * 7], "all equal"),
         ([[0.0] * 6, [0.1] * 6], "shape"),
         ([0.0, 0.1], "shape"),
     ],

@@ -21,18 +21,18 @@ def _polymul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def compose_quadratic(cubic: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """Coefficients of ``q(sigma(tau))`` for cubic pieces ``q`` and a polynomial ``sigma`` (quadratic, cubic, ...).
+    """Coefficients of ``q(sigma(tau))`` for polynomial pieces ``q`` (cubic, quintic, ...) and a polynomial ``sigma``.
 
     Args:
-        cubic: Shape (m, 4, n): ``q(x) = sum_k cubic[:, k] x**k``.
+        cubic: Shape (m, d+1, n): ``q(x) = sum_k cubic[:, k] x**k``.
         sigma: Shape (m, p+1): ``x = sum_i sigma[:, i] tau**i``.
 
     Returns:
-        Shape (m, 3p+1, n): ascending powers of ``tau`` (7 for a quadratic ``sigma``).
+        Shape (m, d p+1, n): ascending powers of ``tau`` (7 for a cubic ``q`` and a quadratic ``sigma``).
     """
-    m, _, n = cubic.shape
+    m, order, n = cubic.shape
     powers = [np.ones((m, 1))]
-    for _ in range(3):
+    for _ in range(order - 1):
         powers.append(_polymul(powers[-1], sigma))
     out = np.zeros((m, powers[-1].shape[1], n))
     for k, pk in enumerate(powers):

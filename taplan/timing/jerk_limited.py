@@ -261,7 +261,7 @@ def jerk_limited(
         raise InvalidInputError("repairs", repairs, "an integer >= 0")
     if int(points_per_segment) < 1:
         raise InvalidInputError("points_per_segment", points_per_segment, "an integer >= 1")
-    path, _, _ = as_path(path_or_waypoints, limits.size)
+    path, _, _ = as_path(path_or_waypoints, limits.size, limits=limits if check_positions else None)
     if check_positions:
         check_path_positions(path, limits)
     if method == "joint" and max_deviation > 0:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from math import comb
 
 import numpy as np
 import numpy.typing as npt
@@ -38,7 +39,7 @@ from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.timing._polynomial import compose_quadratic, max_abs_derivative, time_scaled
 from taplan.timing.constraints import PathJerkSpeedConstraint, SegmentLimitConstraint
-from taplan.timing.path import Path
+from taplan.timing.path import Path, drop_duplicates
 from taplan.trajectory import Trajectory
 
 __all__ = ["retime", "time_optimal_profile", "PathProfile", "as_path", "DEFAULT_POINTS_PER_SEGMENT"]
@@ -92,27 +93,48 @@ def as_path(
     dof: int,
     start_velocity: np.ndarray | None = None,
     end_velocity: np.ndarray | None = None,
+    *,
+    limits: JointLimits | None = None,
 ) -> tuple[Path, float, float]:
-    """The path to retime and the boundary path speeds (sd_start, sd_end) matching the boundary joint velocities."""
+    """The path to retime and the boundary path speeds (sd_start, sd_end) matching the boundary joint velocities.
+
+    Waypoints become a :class:`Path` without repeated waypoints; with ``limits`` it stays inside their position
+    bounds (a waypoint outside them raises :class:`TimingError`, naming it).
+    """
     if isinstance(path_or_waypoints, Path):
         path = path_or_waypoints
         if path.dof != dof:
             raise InvalidInputError("path", f"{path.dof} joints", f"{dof} joints, like the limits")
     else:
-        from taplan.timing.path import validate_waypoints
-
-        q = validate_waypoints(path_or_waypoints, "path_or_waypoints", dof)
+        q = drop_duplicates(path_or_waypoints, "path_or_waypoints", dof)
+        bounds = None if limits is None else _position_box(q, limits)
+        # uniform knots spanning the chord length: |q'| about 1, so TOPP-RA's path speeds stay well scaled for a
+        # path of micro-radians as for one of radians (toppra fails on the former with s in [0, 1])
+        length = float(np.sum(np.linalg.norm(np.diff(q, axis=0), axis=1)))
+        ss = np.linspace(0.0, length, len(q))
         tangents = []
         for v, (i, j) in ((start_velocity, (0, 1)), (end_velocity, (-2, -1))):
             if v is None or not np.any(v):
                 tangents.append(None)
                 continue
-            scale = np.linalg.norm(q[j] - q[i]) * (len(q) - 1)  # |q'| of the chord with uniform s in [0, 1]
+            scale = np.linalg.norm(q[j] - q[i]) / (ss[1] - ss[0])  # |q'| of the end chord
             tangents.append(v / np.linalg.norm(v) * scale)
-        path = Path(q, start_tangent=tangents[0], end_tangent=tangents[1])
+        path = Path(q, ss, start_tangent=tangents[0], end_tangent=tangents[1], bounds=bounds)
     s0, s1 = path.path_interval
     sd_start = _path_speed(path, s0, start_velocity, "start_velocity")
     return path, sd_start, _path_speed(path, s1, end_velocity, "end_velocity")
+
+
+def _position_box(q: np.ndarray, limits: JointLimits) -> tuple[np.ndarray, np.ndarray]:
+    """The box the path must stay in: the position limits, widened by rounding-size excursions of the waypoints."""
+    over = np.maximum(q - limits.upper, limits.lower - q)
+    if np.any(over > POSITION_TOL):
+        k, j = np.unravel_index(int(np.argmax(over)), over.shape)
+        raise TimingError(
+            f"waypoint {k} is outside the position limits: {limits.names[j]} = {q[k, j]:.9g} rad "
+            f"(limits [{limits.lower[j]:.9g}, {limits.upper[j]:.9g}]); no trajectory through it is within the limits"
+        )
+    return np.minimum(limits.lower, q.min(axis=0)), np.maximum(limits.upper, q.max(axis=0))
 
 
 def _path_speed(path: Path, s: float, velocity: np.ndarray | None, name: str) -> float:
@@ -269,7 +291,7 @@ def retime(
             raise TimingError(
                 f"{name}[{limits.names[j]}] = {v[j]:.6g} rad/s exceeds the velocity limit {limits.velocity[j]:.6g}"
             )
-    path, sd0, sd1 = as_path(path_or_waypoints, n, v0, v1)
+    path, sd0, sd1 = as_path(path_or_waypoints, n, v0, v1, limits=limits if check_positions else None)
     if check_positions:
         check_path_positions(path, limits)
     velocity = np.array(limits.velocity, dtype=float)
@@ -295,13 +317,37 @@ def retime(
 
 
 def check_path_positions(path: Path, limits: JointLimits) -> None:
-    """Raise :class:`TimingError` when the path (sampled densely) leaves the position limits."""
-    s = _grid(path, 32)
-    q = path(s)
-    over = np.maximum(q - limits.upper, limits.lower - q)
-    if np.any(over > POSITION_TOL):
-        i, j = np.unravel_index(int(np.argmax(over)), over.shape)
+    """Raise :class:`TimingError` when the path leaves the position limits (exact: Bernstein hulls, then the real
+    extrema of the pieces whose hull crosses a bound)."""
+    ss = path.ss_waypoints
+    c = path.piece_coefficients()  # (m, d+1, n)
+    h = np.diff(ss)
+    degree = c.shape[1] - 1
+    # Bernstein coefficients of each piece on [0, h]: b_k = sum_{i<=k} C(k,i)/C(d,i) a_i h^i
+    scaled = c * (h[:, None] ** np.arange(degree + 1))[:, :, None]
+    weights = np.array(
+        [[comb(k, i) / comb(degree, i) if i <= k else 0.0 for i in range(degree + 1)] for k in range(degree + 1)]
+    )
+    hull = np.einsum("ki,min->mkn", weights, scaled)
+    suspect = np.argwhere(
+        (hull.max(axis=1) > limits.upper + POSITION_TOL) | (hull.min(axis=1) < limits.lower - POSITION_TOL)
+    )
+    worst = (0.0, 0.0, 0, 0.0)
+    for m, j in suspect:
+        poly = np.polynomial.Polynomial(c[m, :, j])
+        roots = poly.deriv().roots()
+        x = np.concatenate(
+            [[0.0, h[m]], roots[(np.abs(roots.imag) < 1e-12) & (roots.real >= 0) & (roots.real <= h[m])].real]
+        )
+        values = poly(x)
+        for value, xi in zip(values, x, strict=True):
+            over = max(value - limits.upper[j], limits.lower[j] - value)
+            if over > worst[0]:
+                worst = (over, float(value), int(j), float(ss[m] + xi))
+    if worst[0] > POSITION_TOL:
+        _, value, j, s = worst
         raise TimingError(
-            f"the path leaves the position limits: {limits.names[j]} = {q[i, j]:.6g} rad at s={s[i]:.6g} "
-            f"(limits [{limits.lower[j]:.6g}, {limits.upper[j]:.6g}])"
+            f"the path leaves the position limits: {limits.names[j]} = {value:.6g} rad at s={s:.6g} "
+            f"(limits [{limits.lower[j]:.6g}, {limits.upper[j]:.6g}]); pass waypoints (taplan then builds a path "
+            "that stays inside) or a Path built with bounds"
         )
