@@ -16,7 +16,7 @@ import taplan
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = ("info", "demo", "plan", "check", "replay", "run", "sim", "bench")
+COMMANDS = ("info", "demo", "plan", "check", "replay", "run", "sim", "bench", "view")
 
 
 def build_parser() -> argparse.ArgumentParser:
