@@ -9,6 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+# drawn capsules sit in the very frame the collision world places its coal capsules in (z along the segment)
+from taplan.scene.world import _segment_frame as segment_pose
+
 __all__ = ["capsule_mesh", "cylinder_mesh", "box_mesh", "segment_pose", "wxyz", "HALF_SPACE_EXTENT"]
 
 HALF_SPACE_EXTENT = 2.0  # [m] a half-space is drawn as a slab this wide: the reachable area of a two-arm robot
@@ -19,24 +22,6 @@ def wxyz(rotation: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) of a rotation matrix, viser's order (pinocchio stores x, y, z, w)."""
     x, y, z, w = pin.Quaternion(np.asarray(rotation, dtype=float)).normalized().coeffs()
     return np.array([w, x, y, z])
-
-
-def segment_pose(start: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """A 4x4 pose at the segment's midpoint whose z axis points from ``start`` to ``end`` (any z for a point)."""
-    start = np.asarray(start, dtype=float)
-    end = np.asarray(end, dtype=float)
-    axis = end - start
-    length = float(np.linalg.norm(axis))
-    T = np.eye(4)
-    T[:3, 3] = (start + end) / 2
-    if length < 1e-12:
-        return T
-    z = axis / length
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-    return T
 
 
 def _ring_faces(rings: int, segments: int) -> np.ndarray:
