@@ -28,6 +28,7 @@ import numpy as np
 from taplan.check import Report, check
 from taplan.errors import InfeasibleError
 from taplan.ik import solve_pose
+from taplan.io import output_path
 from taplan.limits import JointLimits
 from taplan.planning.cartesian import cartesian_offset
 from taplan.reference import IndustrialSimulator, JointModeRobot, JointTrajectoryController, Replay
@@ -226,8 +227,7 @@ def run_demo(
     robot = robot or Robot.teleavatar()
     planning = robot.planning_limits
     hardware = robot.limits
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_path(out_dir, "out_dir", directory=True)
 
     say("reach: IK to two end-effector poses, jerk-limited timing")
     reach = plan_reach(robot, planning, robot.home)

@@ -16,7 +16,6 @@ point. Files: CSV (``time`` then ``<joint>.pos``/``.vel``/``.acc`` columns), JSO
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from taplan._validation import as_positive
-from taplan.errors import ConfigError, InvalidInputError
+from taplan.errors import InvalidInputError
 
 __all__ = ["Trajectory", "Waypoint", "concatenate"]
 
@@ -334,90 +333,37 @@ class Trajectory:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict[str, object]) -> Trajectory:
-        """Inverse of :meth:`to_dict` (a ``coefficients`` entry makes a polynomial trajectory)."""
-        try:
-            if data.get("coefficients") is not None:
-                return cls.from_polynomials(
-                    data["times"],  # type: ignore[arg-type]
-                    data["coefficients"],  # type: ignore[arg-type]
-                    data.get("joint_names"),  # type: ignore[arg-type]
-                    continuous_velocity=False,
-                )
-            return cls(
-                data["times"],  # type: ignore[arg-type]
-                data["positions"],  # type: ignore[arg-type]
-                data.get("velocities"),  # type: ignore[arg-type]
-                data.get("accelerations"),  # type: ignore[arg-type]
-                data.get("joint_names"),  # type: ignore[arg-type]
-            )
-        except KeyError as exc:
-            raise ConfigError(f"trajectory data lacks {exc}; needs 'times' and 'positions'") from exc
+    def from_dict(cls, data: dict[str, object], *, joint_names: Sequence[str] | None = None) -> Trajectory:
+        """Inverse of :meth:`to_dict`, validated by the trajectory-file contract (:mod:`taplan.io`).
+
+        A ``coefficients`` entry makes a polynomial trajectory; samples given beside it must agree with it.
+        """
+        from taplan.io.trajectory_file import build_trajectory
+
+        if not isinstance(data, dict):
+            raise InvalidInputError("data", type(data).__name__, "a dict with 'joint_names', 'times', 'positions'")
+        return build_trajectory(data, joint_names, source="data")
 
     def save(self, path: str | Path) -> Path:
-        """Write to ``.csv``, ``.json`` or ``.npz`` (by suffix). Returns the path.
+        """Write to ``.csv``, ``.json`` or ``.npz`` (by suffix), exactly in every format; returns the path.
 
-        JSON and NPZ are exact (a polynomial trajectory keeps its coefficients). CSV holds the samples only: a
-        polynomial trajectory saved as CSV loads back as the quintic Hermite through its samples.
+        See :mod:`taplan.io.trajectory_file` for the layouts; a polynomial trajectory keeps its coefficients.
         """
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix == ".json":
-            path.write_text(json.dumps(self.to_dict()))
-        elif suffix == ".npz":
-            arrays = {k: np.asarray(v) for k, v in self.to_dict().items()}
-            np.savez(path, **arrays)
-        elif suffix == ".csv":
-            columns = ["time"] + [f"{n}.pos" for n in self.joint_names]
-            blocks = [self.times[:, None], self.positions]
-            for tag, arr in (("vel", self.velocities), ("acc", self.accelerations)):
-                if arr is not None:
-                    columns += [f"{n}.{tag}" for n in self.joint_names]
-                    blocks.append(arr)
-            np.savetxt(path, np.hstack(blocks), delimiter=",", header=",".join(columns), comments="", fmt="%.17g")
-        else:
-            raise InvalidInputError("path", str(path), "a file ending in .csv, .json or .npz")
-        return path
+        from taplan.io import save_trajectory
+
+        return save_trajectory(self, path)
 
     @classmethod
-    def load(cls, path: str | Path) -> Trajectory:
-        """Read a file written by :meth:`save` (or any file of the same layout)."""
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"trajectory file not found: {str(path)!r}")
-        suffix = path.suffix.lower()
-        try:
-            if suffix == ".json":
-                return cls.from_dict(json.loads(path.read_text()))
-            if suffix == ".npz":
-                with np.load(path, allow_pickle=False) as npz:
-                    return cls.from_dict({k: npz[k] for k in npz.files})
-            if suffix == ".csv":
-                return _load_csv(path)
-        except (ValueError, json.JSONDecodeError) as exc:
-            if isinstance(exc, InvalidInputError):
-                raise
-            raise ConfigError(f"cannot parse {str(path)!r}: {exc}") from exc
-        raise InvalidInputError("path", str(path), "a file ending in .csv, .json or .npz")
+    def load(cls, path: str | Path, joint_names: Sequence[str] | None = None) -> Trajectory:
+        """Read and validate a trajectory file (:func:`taplan.io.load_trajectory`).
 
+        Args:
+            path: ``.json``, ``.csv`` or ``.npz``.
+            joint_names: The robot's joints; when given, every joint in the file must be one of them.
+        """
+        from taplan.io import load_trajectory
 
-def _load_csv(path: Path) -> Trajectory:
-    with path.open() as handle:
-        header = handle.readline().strip().split(",")
-    table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    if not header or header[0] != "time" or table.shape[1] != len(header):
-        raise ConfigError(f"{str(path)!r}: expected a 'time' column then '<joint>.pos' columns")
-    names = [h[:-4] for h in header if h.endswith(".pos")]
-    fields: dict[str, np.ndarray] = {}
-    for tag in ("pos", "vel", "acc"):
-        cols = [header.index(f"{n}.{tag}") for n in names if f"{n}.{tag}" in header]
-        if cols and len(cols) != len(names):
-            raise ConfigError(f"{str(path)!r}: '.{tag}' columns must cover every joint or none")
-        if cols:
-            fields[tag] = table[:, cols]
-    if "pos" not in fields:
-        raise ConfigError(f"{str(path)!r}: no '<joint>.pos' columns")
-    return Trajectory(table[:, 0], fields["pos"], fields.get("vel"), fields.get("acc"), names)
+        return load_trajectory(path, joint_names)
 
 
 def _finite(value: npt.ArrayLike, name: str, ndim: int) -> np.ndarray:

@@ -14,8 +14,9 @@ import argparse
 from pathlib import Path
 
 from taplan.check import Thresholds, check
-from taplan.commands.replay import add_controller_arguments, replay_with
-from taplan.trajectory import Trajectory
+from taplan.commands.replay import add_controller_arguments, replay_with, validate_controller_arguments
+from taplan.errors import ConfigError, InvalidInputError
+from taplan.io import bounded_rate, load_trajectory, output_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,7 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_controller_arguments(parser, "trajectory")
     parser.add_argument("--limits", choices=("hardware", "planning"), default="hardware", help="limit set (hardware)")
-    parser.add_argument("--source", choices=("updates", "samples"), default="updates", help="replay stream to check")
+    parser.add_argument(
+        "--source",
+        choices=("updates", "samples"),
+        default=None,
+        help="replay stream to check with a --controller: its updates (default) or its joint_states samples",
+    )
     parser.add_argument("--rate", type=float, default=None, help="evaluation rate of a trajectory [Hz] (1000)")
     parser.add_argument("--no-jerk", action="store_true", help="report jerk without failing on it")
     parser.add_argument("--png", type=Path, default=None, help="plot file (default <file>_check.png)")
@@ -32,13 +38,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, default=None, help="also write the report as JSON")
 
 
+def _validate(args: argparse.Namespace) -> None:
+    """Every option checked before any work, so no error can follow a printed verdict."""
+    validate_controller_arguments(args)
+    if args.rate is not None:
+        if args.controller != "trajectory" or args.file.suffix.lower() == ".mcap":
+            raise InvalidInputError("--rate", args.rate, "no --rate with a --controller or a bag (they set the rate)")
+        args.rate = bounded_rate(args.rate, "--rate")
+    if args.source is not None and args.controller == "trajectory":
+        raise InvalidInputError("--source", args.source, "no --source without a --controller (a plan has no streams)")
+    args.source = args.source or "updates"
+    if args.png is not None and args.no_png:
+        raise InvalidInputError("--png", str(args.png), "either --png or --no-png, not both")
+    if args.png is not None:
+        output_path(args.png, "--png", suffixes=(".png",))
+    if args.json is not None:
+        output_path(args.json, "--json", suffixes=(".json",))
+    if not args.file.is_file():
+        raise ConfigError(f"file not found: {str(args.file)!r}")
+
+
 def run(args: argparse.Namespace) -> int:
     from taplan.robot import Robot
 
+    _validate(args)
     if args.file.suffix.lower() == ".mcap":
         return _check_bag(args)
-    trajectory = Trajectory.load(args.file)
     robot = Robot.teleavatar()
+    trajectory = load_trajectory(args.file, robot.joint_names)
     all_limits = robot.limits if args.limits == "hardware" else robot.planning_limits
     limits = all_limits.subset(trajectory.joint_names)
     thresholds = Thresholds(check_jerk=not args.no_jerk)
@@ -54,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_png:
         from taplan.plots import save_profiles
 
-        png = args.png or args.file.with_name(f"{args.file.stem}_check.png")
+        png = args.png or output_path(args.file.with_name(f"{args.file.stem}_check.png"), "--png")
         save_profiles(subject, png, limits)
         print(f"wrote {png}")
     if args.json is not None:

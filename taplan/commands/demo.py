@@ -23,6 +23,9 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from taplan.demo import run_demo
+    from taplan.io import output_path
+
+    output_path(args.out, "--out", directory=True)  # before the progress bar, so an error is one clean line
 
     start = time.perf_counter()
     bar = tqdm(total=9 if not args.no_plots else 6, desc="taplan demo", unit="step", leave=False)

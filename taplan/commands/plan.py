@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from taplan.check import Thresholds, check
-from taplan.errors import ConfigError
+from taplan.errors import InvalidInputError
+from taplan.io import bounded_rate, output_path, read_waypoints
+from taplan.io.trajectory_file import SUFFIXES
 from taplan.robot import Robot
 from taplan.trajectory import Trajectory
 
@@ -34,34 +36,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--margin", type=float, default=0.01, help="clearance of the planned path [m] (0.01)")
 
 
-def load_waypoints(path: Path) -> tuple[list[str], np.ndarray]:
+def load_waypoints(path: Path, joint_names: tuple[str, ...] | None = None) -> tuple[list[str], np.ndarray]:
     """Joint names and waypoints (N, n) from a trajectory file or a plain CSV with a joint-name header."""
-    if path.suffix.lower() == ".csv":
-        header = path.read_text().splitlines()[0].split(",") if path.is_file() else []
-        if header and header[0] != "time":
-            try:
-                table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-            except ValueError as exc:
-                raise ConfigError(f"cannot parse {str(path)!r}: {exc}") from exc
-            return [h.strip() for h in header], table
-    trajectory = Trajectory.load(path)
-    return list(trajectory.joint_names), np.array(trajectory.positions)
+    names, waypoints = read_waypoints(path, joint_names)
+    return list(names), waypoints
 
 
 def run(args: argparse.Namespace) -> int:
     from taplan.timing import jerk_limited, retime
 
     path = Path(args.file)
-    names, waypoints = load_waypoints(path)
+    args.rate = bounded_rate(args.rate, "--rate")
+    if args.margin < 0 or not np.isfinite(args.margin):
+        raise InvalidInputError("--margin", args.margin, "a clearance >= 0 [m]")
+    default = f"{path.stem}_planned.json" if args.scene is not None else f"{path.stem}_timed.json"
+    output = output_path(Path(args.output) if args.output else path.with_name(default), "--output", suffixes=SUFFIXES)
     robot = Robot.teleavatar()
+    names, waypoints = load_waypoints(path, robot.joint_names)
     if args.scene is not None:
-        return _plan_in_scene(args, path, names, waypoints, robot)
+        return _plan_in_scene(args, path, output, names, waypoints, robot)
     limits = (robot.planning_limits if args.limits == "planning" else robot.limits).subset(names)
     if args.method == "topp":
         trajectory = retime(waypoints, limits)
     else:
         trajectory = jerk_limited(waypoints, limits).trajectory
-    output = Path(args.output) if args.output else path.with_name(f"{path.stem}_timed.json")
     trajectory.save(output)
     sampled = trajectory.resample(args.rate).save(output.with_name(f"{output.stem}_{args.rate:g}hz.csv"))
     thresholds = Thresholds(check_jerk=args.method == "jerk")  # TOPP-RA limits velocity and acceleration only
@@ -72,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
     return 0 if report.passed else 1
 
 
-def _plan_in_scene(args: argparse.Namespace, path: Path, names: list[str], waypoints: np.ndarray, robot: Robot) -> int:
+def _plan_in_scene(
+    args: argparse.Namespace, path: Path, output: Path, names: list[str], waypoints: np.ndarray, robot: Robot
+) -> int:
     from taplan.errors import PlanningError
     from taplan.planning import plan_motion
     from taplan.scene import CollisionWorld, load_scene
@@ -100,7 +100,6 @@ def _plan_in_scene(args: argparse.Namespace, path: Path, names: list[str], waypo
     width = max(c.shape[1] for c in pieces)
     coefficients = np.concatenate([np.pad(c, ((0, 0), (0, width - c.shape[1]), (0, 0))) for c in pieces], axis=0)
     trajectory = Trajectory.from_polynomials(np.array(times), coefficients, robot.joint_names)
-    output = Path(args.output) if args.output else path.with_name(f"{path.stem}_planned.json")
     trajectory.save(output)
     sampled = trajectory.resample(args.rate).save(output.with_name(f"{output.stem}_{args.rate:g}hz.csv"))
     report = check(trajectory, limits, name=f"{path.name} in {args.scene}")

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from taplan.errors import InvalidInputError
+from taplan.io import bounded_rate, load_trajectory, output_path
 from taplan.reference import IndustrialSimulator, JointModeRobot, JointTrajectoryController, Replay
 from taplan.trajectory import Trajectory
 
@@ -30,12 +32,37 @@ def add_controller_arguments(parser: argparse.ArgumentParser, default: str) -> N
     parser.add_argument(
         "--command-rate", type=float, default=100.0, help="joint_cmd rate for joint mode [Hz] (100, the arm loop rate)"
     )
-    parser.add_argument("--jitter", type=float, default=0.0, help="joint_cmd period jitter, fraction (0)")
+    parser.add_argument(
+        "--jitter", type=float, default=0.0, help="joint_cmd period jitter, a fraction in [0, 1), joint mode only (0)"
+    )
+
+
+def validate_controller_arguments(args: argparse.Namespace) -> None:
+    """Rates within range; ``--jitter`` only where it acts (the joint-mode command stream)."""
+    for option in ("update_rate", "pub_rate", "command_rate"):
+        setattr(args, option, bounded_rate(getattr(args, option), "--" + option.replace("_", "-")))
+    jitter = args.jitter
+    if not (0.0 <= jitter < 1.0):
+        raise InvalidInputError("--jitter", jitter, "a fraction in [0, 1)")
+    if jitter and not args.controller.startswith("joint-"):
+        raise InvalidInputError(
+            "--jitter",
+            f"{jitter:g} with --controller {args.controller}",
+            "0 unless --controller is joint-position or joint-velocity",
+        )
 
 
 def replay_with(trajectory: Trajectory, args: argparse.Namespace, limits=None) -> Replay:  # noqa: ANN001
-    """Run ``trajectory`` through the controller named by ``args.controller``."""
+    """Run ``trajectory`` through the controller named by ``args.controller``.
+
+    The simulators and the trajectory controller receive the trajectory sampled at their update rate (its
+    positions, velocities and accelerations every period, as a planner streams a plan), not its knots: a plan's
+    knots are where its polynomial pieces meet, irregular and often microseconds apart, not points meant to be sent.
+    The joint mode samples at ``--command-rate`` itself.
+    """
     name = args.controller
+    if name in ("seed", "intended", "jtc", "jtc-none"):
+        trajectory = trajectory.resample(args.update_rate)
     if name in ("seed", "intended"):
         return IndustrialSimulator(args.update_rate, args.pub_rate, mode=name).replay(trajectory)
     if name in ("jtc", "jtc-none"):
@@ -54,9 +81,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    trajectory = Trajectory.load(args.file)
-    replay = replay_with(trajectory, args)
+    from taplan.robot import Robot
+
+    validate_controller_arguments(args)
     output = args.output or args.file.with_name(f"{args.file.stem}_{args.controller}_replay.json")
+    output = output_path(output, "--output", suffixes=(".json", ".npz", ".csv"))
+    robot = Robot.teleavatar()
+    trajectory = load_trajectory(args.file, robot.joint_names)
+    replay = replay_with(trajectory, args)
     written = replay.save(output)
     samples = len(replay.samples) if replay.samples is not None else 0
     print(

@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.targets is not None and args.duration is None:
         raise InvalidInputError("--duration", None, "a streaming time [s] with --targets")
-    trajectory = Trajectory.load(args.file) if args.file is not None else None
+    trajectory = Trajectory.load(args.file, Robot.teleavatar().joint_names) if args.file is not None else None
     config = RunnerConfig(
         rate=args.rate,
         state_timeout=args.state_timeout,

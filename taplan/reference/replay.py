@@ -114,6 +114,10 @@ class Replay:
         """Positions and velocities held at time(s) ``t`` [s] (the latest update at or before ``t``)."""
         t_arr = np.atleast_1d(np.asarray(t, dtype=float))
         k = np.searchsorted(self.times, t_arr, side="right") - 1
+        if len(self.times) == 0:  # no update at all (every waypoint dropped): the initial state is held
+            q = np.repeat(self.initial_positions[None, :], t_arr.size, axis=0)
+            v = np.repeat(self.initial_velocities[None, :], t_arr.size, axis=0)
+            return (q[0], v[0]) if np.ndim(t) == 0 else (q, v)
         q = np.where((k < 0)[:, None], self.initial_positions, self.positions[np.maximum(k, 0)])
         v = np.where((k < 0)[:, None], self.initial_velocities, self.velocities[np.maximum(k, 0)])
         if np.ndim(t) == 0:
