@@ -173,10 +173,12 @@ class Report:
             + ("PASS" if self.passed else "FAIL"),
             head,
         ]
+        bounded = self.thresholds.check_jerk
         for j in self.joints:
+            jerk_limit = f"{j.jerk_limit:>9.0f}" if bounded else f"{'n/b':>9}"
             lines.append(
                 f"{j.name:<10}{j.peak_velocity:>9.3f}{j.velocity_limit:>8.2f}{j.peak_acceleration:>10.2f}"
-                f"{j.acceleration_limit:>8.1f}{j.peak_jerk:>11.1f}{j.jerk_limit:>9.0f}{j.max_velocity_step:>9.4f}"
+                f"{j.acceleration_limit:>8.1f}{j.peak_jerk:>11.1f}{jerk_limit}{j.max_velocity_step:>9.4f}"
                 f"{j.velocity_step_limit:>8.4f}{j.position_violation:>8.4f}{j.sparc:>8.3f}{j.ldlj:>8.2f}  "
                 + ("ok" if j.passed else "FAIL: " + "; ".join(j.failures))
             )
@@ -190,6 +192,12 @@ class Report:
             )
         if self.dropped_waypoints:
             lines.append(f"dropped waypoints: {list(self.dropped_waypoints)}: FAIL")
+        if not bounded:
+            over = [j.name for j in self.joints if j.peak_jerk > j.jerk_limit]
+            lines.append(
+                "jerk: n/b = not bounded by this check (reported, never a pass or a fail)"
+                + (f"; above the jerk limit: {', '.join(over)}" if over else "")
+            )
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
@@ -214,7 +222,9 @@ class Report:
                 "duration": self.duration,
                 "passed": self.passed,
                 "failures": self.failures,
-                "joints": [{**asdict(j), "passed": j.passed} for j in self.joints],
+                "joints": [
+                    {**asdict(j), "passed": j.passed, "jerk_bounded": self.thresholds.check_jerk} for j in self.joints
+                ],
                 "timing": None if self.timing is None else {**asdict(self.timing), "passed": self.timing.passed},
                 "thresholds": asdict(self.thresholds),
                 "dropped_waypoints": list(self.dropped_waypoints),

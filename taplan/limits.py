@@ -58,13 +58,18 @@ DEFAULT_PLANNING_SCALING = PlanningScaling()
 
 @dataclass(frozen=True)
 class LimitDifference:
-    """One position bound where two sources disagree (e.g. ``arm_config.yml`` vs the URDF)."""
+    """One limit where two sources disagree (e.g. ``arm_config.yml`` vs the URDF).
+
+    The rule: the more restrictive value is used, unless the caller overrides a source explicitly and says why
+    (``reason``), e.g. the TeleAvatar URDF's velocity, a documented placeholder.
+    """
 
     joint: str
-    bound: str  # "lower" or "upper"
-    config: float  # [rad]
-    model: float  # [rad]
-    used: float  # [rad], the tighter of the two
+    bound: str  # "lower", "upper", "velocity", "acceleration" or "jerk"
+    config: float  # [rad], [rad]/[s], ...
+    model: float
+    used: float  # the more restrictive of the two, unless overridden
+    reason: str = ""  # why the more restrictive value is not used ("" when it is)
 
 
 @dataclass(frozen=True)
@@ -78,7 +83,7 @@ class JointLimits:
         velocity: Maximum absolute velocity [rad]/[s]. Shape (n,).
         acceleration: Maximum absolute acceleration [rad]/[s]². Shape (n,).
         jerk: Maximum absolute jerk [rad]/[s]³. Shape (n,).
-        differences: Position bounds that were tightened when sources were intersected.
+        differences: Limits where two sources disagreed when they were intersected (see :class:`LimitDifference`).
     """
 
     names: tuple[str, ...]
@@ -146,6 +151,8 @@ class JointLimits:
         model_upper: npt.ArrayLike | None = None,
         jerk: npt.ArrayLike | None = None,
         sides: tuple[str, ...] = ("left", "right"),
+        model_velocity: npt.ArrayLike | None = None,
+        model_velocity_override: str | None = None,
     ) -> JointLimits:
         """Read the vendor's ``arm_config.yml`` as it is.
 
@@ -160,6 +167,10 @@ class JointLimits:
             model_upper: Model upper bounds [rad], shape (n,), or None.
             jerk: Jerk ceiling [rad]/[s]³, shape (n,); default 10 × acceleration.
             sides: Arms to read, in output order.
+            model_velocity: The model's velocity limits [rad]/[s] (same order), or None. The lower of the two
+                sources is used per joint, and every disagreement is recorded in ``differences``.
+            model_velocity_override: A reason to use ``arm_config``'s velocity where the model's is lower (e.g. the
+                model's value is a documented placeholder); recorded with each such difference.
         """
         import yaml
 
@@ -201,13 +212,25 @@ class JointLimits:
             for i in np.flatnonzero(cfg != model):
                 differences.append(LimitDifference(names[i], bound, float(cfg[i]), float(model[i]), float(used[i])))
             cfg[:] = used
-        differences.sort(key=lambda d: (names.index(d.joint), d.bound))
-        for d in differences:
-            logger.info(
-                "%s %s bound: arm_config %.3f, model %.3f, using %.3f", d.joint, d.bound, d.config, d.model, d.used
-            )
         velocity = np.tile(vel, len(sides))
+        if model_velocity is not None:
+            model_v = np.asarray(model_velocity, dtype=float)
+            if model_v.shape != velocity.shape:
+                raise InvalidInputError("model_velocity", f"shape {model_v.shape}", f"shape {velocity.shape}")
+            for i in np.flatnonzero(model_v != velocity):
+                tighter = min(float(velocity[i]), float(model_v[i]))
+                overridden = model_velocity_override is not None and model_v[i] < velocity[i]
+                used = float(velocity[i]) if overridden else tighter
+                reason = model_velocity_override if overridden else ""
+                differences.append(
+                    LimitDifference(names[i], "velocity", float(velocity[i]), float(model_v[i]), used, reason or "")
+                )
+                velocity[i] = used
         acceleration = np.tile(acc, len(sides))
+        order = ("lower", "upper", "velocity", "acceleration", "jerk")
+        differences.sort(key=lambda d: (order.index(d.bound), names.index(d.joint)))
+        for d in differences:
+            logger.info("%s %s: arm_config %.3f, model %.3f, using %.3f", d.joint, d.bound, d.config, d.model, d.used)
         if jerk is None:
             jerk = DEFAULT_JERK_PER_ACCELERATION * acceleration
         return cls(tuple(names), lo, hi, velocity, acceleration, np.asarray(jerk, dtype=float), tuple(differences))

@@ -19,6 +19,7 @@ import pinocchio as pin
 
 from taplan._validation import as_matrix, as_vector
 from taplan.errors import ConfigError, InvalidInputError, UnknownNameError
+from taplan.io.native import native_stderr
 from taplan.limits import DEFAULT_PLANNING_SCALING, JointLimits
 from taplan.scene.capsules import Capsule, capsules_from_urdf
 
@@ -92,9 +93,11 @@ class Robot:
         if not self.urdf_path.is_file():
             raise ConfigError(f"URDF not found: {str(self.urdf_path)!r}")
         try:
-            self.model: pin.Model = pin.buildModelFromUrdf(str(self.urdf_path))
+            with native_stderr() as urdfdom:  # its C++ error lines would precede taplan's one-line message
+                self.model: pin.Model = pin.buildModelFromUrdf(str(self.urdf_path))
         except (RuntimeError, ValueError) as exc:
-            raise ConfigError(f"pinocchio cannot load {str(self.urdf_path)!r}: {exc}") from exc
+            detail = f" ({urdfdom.first_error})" if urdfdom.first_error else ""
+            raise ConfigError(f"pinocchio cannot load {str(self.urdf_path)!r}: {exc}{detail}") from None
         if self.model.nq != self.model.nv or self.model.nq != self.model.njoints - 1:
             raise ConfigError(
                 f"{self.urdf_path.name}: taplan supports 1-DoF joints only (nq={self.model.nq}, nv={self.model.nv})"
@@ -141,8 +144,15 @@ class Robot:
         arm_config: str | Path = TELEAVATAR_ARM_CONFIG,
         system_config: str | Path = TELEAVATAR_SYSTEM_CONFIG,
         urdf_path: str | Path = TELEAVATAR_URDF,
+        urdf_velocity: bool = False,
     ) -> Robot:
         """The bundled TeleAvatar dual arm: 14 joints ``l_joint1..7, r_joint1..7``.
+
+        Limits rule: where ``arm_config.yml`` and the URDF disagree, the more restrictive value wins, with one
+        explicit override: the URDF's ``velocity="5.0"`` on every arm joint is a documented placeholder (the vendor
+        model's notes; the speed limits are ``arm_config``'s ``vel_limit``), so ``arm_config``'s velocity is used
+        unless ``urdf_velocity=True``. Every disagreement (and the override's reason) is in
+        ``robot.limits.differences`` and shown by ``taplan info``.
 
         Limits come from ``arm_config.yml`` intersected with the URDF's position bounds (the tightened bounds are
         in ``robot.limits.differences``). The home pose is the last ``adjust_pose`` waypoint of
@@ -151,9 +161,14 @@ class Robot:
         Groups ``left`` and ``right`` have end effectors ``left_ee`` / ``right_ee`` and bases
         ``left_shoulder_base`` / ``right_shoulder_base``.
         """
-        model = pin.buildModelFromUrdf(str(urdf_path))
+        with native_stderr():
+            model = pin.buildModelFromUrdf(str(urdf_path))
         limits = JointLimits.from_arm_config(
-            arm_config, model_lower=model.lowerPositionLimit, model_upper=model.upperPositionLimit
+            arm_config,
+            model_lower=model.lowerPositionLimit,
+            model_upper=model.upperPositionLimit,
+            model_velocity=model.velocityLimit,
+            model_velocity_override=None if urdf_velocity else URDF_VELOCITY_PLACEHOLDER,
         )
         right = _adjust_pose(system_config)
         home = np.concatenate([0.0 - right, right])  # 0.0 - x: no negative zeros
@@ -335,6 +350,9 @@ def _adjust_pose(path: str | Path) -> np.ndarray:
     if right.shape != (7,) or not np.all(np.isfinite(right)):
         raise ConfigError(f"{str(path)!r}: the last robot.adjust_pose.right entry must hold 7 finite numbers")
     return right
+
+
+URDF_VELOCITY_PLACEHOLDER = "the URDF's velocity is a placeholder (vendor notes); arm_config's vel_limit is the limit"
 
 
 @lru_cache(maxsize=1)

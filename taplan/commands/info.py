@@ -6,6 +6,7 @@ By default the bundled TeleAvatar; ``--urdf`` loads any URDF (its own limits, ho
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 
 import numpy as np
@@ -29,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
             "joint_names": list(robot.joint_names),
             "limits": robot.limits.to_dict(),
             "planning_limits": robot.planning_limits.to_dict(),
+            "limit_differences": [dataclasses.asdict(d) for d in robot.limits.differences],
             "home": robot.home.tolist(),
             "ee_poses_at_home": {f: T.tolist() for f, T in poses.items()},
         }
@@ -41,10 +43,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"collision capsules: {len(robot.capsules)} ({', '.join(c.link for c in robot.capsules)})")
     print("\nHardware limits [rad, rad/s, rad/s^2, rad/s^3]:")
     print(robot.limits)
-    if robot.limits.differences:
-        print("\nPosition bounds tightened by intersecting arm_config.yml with the URDF:")
-        for d in robot.limits.differences:
-            print(f"  {d.joint:<9} {d.bound}: arm_config {d.config:+.3f}, URDF {d.model:+.3f} -> {d.used:+.3f}")
+    print("\nWhere the limit sources disagree (rule: the more restrictive wins unless overridden, reason given):")
+    print(limit_sources(robot.limits))
     scale = taplan.DEFAULT_PLANNING_SCALING
     print(
         f"\nPlanning limits = hardware x {scale.velocity} (velocity), x {scale.acceleration} (acceleration), "
@@ -63,3 +63,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"  in {base}: position [m] {np.array2string(T_base[:3, 3], precision=4, suppress_small=True)}")
         print(np.array2string(T, precision=4, suppress_small=True, prefix="  "))
     return 0
+
+
+def limit_sources(limits: taplan.JointLimits) -> str:
+    """Every disagreement per quantity (position, velocity, acceleration, jerk), or why there can be none."""
+    lines = []
+    groups = {"position": ("lower", "upper"), "velocity": ("velocity",), "acceleration": ("acceleration",)}
+    groups["jerk"] = ("jerk",)
+    for quantity, bounds in groups.items():
+        rows = [d for d in limits.differences if d.bound in bounds]
+        if not rows:
+            single = {
+                "acceleration": "only arm_config gives one (a URDF has no acceleration limit)",
+                "jerk": "no source gives one; taplan uses 10 x the acceleration limit",
+            }
+            lines.append(f"  {quantity}: no disagreement" + (f" ({single[quantity]})" if quantity in single else ""))
+            continue
+        lines.append(f"  {quantity}: {len(rows)} disagreement(s)")
+        reasons = {d.reason for d in rows if d.reason}
+        for d in rows:
+            note = "  (overridden)" if d.reason else ""
+            lines.append(
+                f"    {d.joint:<9} {d.bound:<8} arm_config {d.config:+.3f}, URDF {d.model:+.3f} -> {d.used:+.3f}{note}"
+            )
+        lines += [f"    overridden because {reason}" for reason in sorted(reasons)]
+    return "\n".join(lines)

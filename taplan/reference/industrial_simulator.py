@@ -251,7 +251,9 @@ class IndustrialSimulator:
         if not seed:
             no_v = ~w.has_velocities[goal]
             if no_v.any():
-                slope = np.where((kind == _LINEAR)[:, None], (P1 - P0) / np.maximum(span, 1)[:, None] * 1e9, 0.0)
+                # the slope of the segment that reached the point, also when it took a single update (a jump
+                # over a move shorter than one period); 0 only after a zero-length move
+                slope = np.where((span > 0)[:, None], (P1 - P0) / np.maximum(span, 1)[:, None] * 1e9, 0.0)
                 v_final[no_v] = slope[no_v]
         velocities[final_event] = v_final
         sleeps = np.full(E, self.step_sleep_ns, dtype=np.int64)
