@@ -53,7 +53,7 @@ def _motions(args: argparse.Namespace, robot: Any) -> list[Any]:
         return motions_from_bag(robot, path)
     if path.suffix.lower() not in TRAJECTORY_SUFFIXES:
         raise InvalidInputError("file", str(path), "a .json, .csv, .npz trajectory or a .mcap bag")
-    return [Motion.from_trajectory(robot, Trajectory.load(path), "plan")]
+    return [Motion.from_trajectory(robot, Trajectory.load(path, robot.joint_names), "plan")]
 
 
 def run(args: argparse.Namespace) -> int:
