@@ -107,6 +107,18 @@ class Scene:
         self.version += 1
         return obstacle
 
+    def put(self, name: str, shape: Shape, pose: npt.ArrayLike | tuple = _IDENTITY) -> Obstacle:
+        """Add obstacle ``name``, or replace its shape and pose in one step (a reader never sees it missing): how
+        perception refreshes the occupancy it sees."""
+        if name not in self.obstacles:
+            return self.add(name, shape, pose)
+        if not isinstance(shape, Shape):
+            raise InvalidInputError("shape", shape, "a taplan.scene shape (Box, Sphere, ...)")
+        obstacle = Obstacle(name, shape, as_pose(pose, f"{name}.pose"))
+        self.obstacles[name] = obstacle
+        self.version += 1
+        return obstacle
+
     def move(self, name: str, pose: npt.ArrayLike | tuple) -> None:
         """Move an obstacle to a new pose."""
         if name not in self.obstacles:

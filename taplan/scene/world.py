@@ -211,7 +211,10 @@ class CollisionWorld:
     def _refresh(self) -> None:
         if self.scene.version == self._version:
             return
-        self._items = [_Item(o.name, o.shape, o.pose) for o in self.scene.obstacles.values()]
+        obstacles = list(self.scene.obstacles.values())
+        # shapes that answer capsule distances themselves (occupancy voxels) stay out of coal
+        self._fields = [o for o in obstacles if hasattr(o.shape, "capsule_distances")]
+        self._items = [_Item(o.name, o.shape, o.pose) for o in obstacles if not hasattr(o.shape, "capsule_distances")]
         self._item_center = np.array([item.pose[:3, 3] for item in self._items]).reshape(-1, 3)
         self._item_normal = np.array([item.pose[:3, 2] for item in self._items]).reshape(-1, 3)
         self._item_radius = np.array([item.radius for item in self._items])
@@ -262,6 +265,7 @@ class CollisionWorld:
             parts += self._self_distances(starts[None], ends[None], cutoff)
         if self._items:
             parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
+        parts += self._field_distances(starts, ends, cutoff, bound_beyond)
         if self._attached_items():
             parts.append(self._attached_distances(starts, ends, cutoff))
         return self._joined(parts, data.J if jacobian else None)
@@ -302,6 +306,8 @@ class CollisionWorld:
                 return transforms[body]
 
             parts[n].append(self._obstacle_distances(starts[n], ends[n], cutoff, math.inf, transform))
+        for n in range(N) if self._fields else ():
+            parts[n] += self._field_distances(starts[n], ends[n], cutoff, math.inf)
         return [self._joined(parts[n], jacobians[n]) for n in range(N)]
 
     def _joined(self, parts: list[_Pairs], J: np.ndarray | None) -> Distances:
@@ -437,6 +443,34 @@ class CollisionWorld:
         )
         return part
 
+    def _field_distances(
+        self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float
+    ) -> list[_Pairs]:
+        """Moving bodies vs obstacles that answer capsule distances themselves (one pair per body: the nearest
+        part), in the obstacle's frame and back."""
+        movers = self._movers
+        out = []
+        for o in self._fields:
+            R, t = o.pose[:3, :3], o.pose[:3, 3]
+            d, pa, pb, n = o.shape.capsule_distances(
+                (starts[movers] - t) @ R, (ends[movers] - t) @ R, self._radius[movers], cutoff, bound_beyond
+            )
+            keep = np.flatnonzero((d <= cutoff) & np.isfinite(d))
+            paired = movers[keep]
+            out.append(
+                _Pairs(
+                    [(self.bodies[k].name, o.name) for k in paired],
+                    d[keep],
+                    pa[keep] @ R.T + t,
+                    pb[keep] @ R.T + t,
+                    n[keep] @ R.T,
+                    self._body_joint[paired],
+                    np.zeros(len(keep), dtype=int),
+                    self._body_reach[paired],
+                )
+            )
+        return out
+
     def _attached_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> _Pairs:
         """Attached objects vs obstacles and vs the robot bodies they may not touch (coal)."""
         data = self.data
@@ -466,6 +500,14 @@ class CollisionWorld:
                 if d > cutoff:
                     continue
                 out.add((att.name, name), d, pa, pb, n, parent, joint, att.reach if row is None else att.reach + row)
+            for o in self._fields:  # against the object's bounding sphere: a lower bound of its distance
+                R, t = o.pose[:3, :3], o.pose[:3, 3]
+                centre = ((att.center - t) @ R)[None]
+                d, pa, pb, n = o.shape.capsule_distances(centre, centre, np.array([att.radius]), cutoff)
+                if d[0] <= cutoff and np.isfinite(d[0]):
+                    out.add(
+                        (att.name, o.name), d[0], pa[0] @ R.T + t, pb[0] @ R.T + t, n[0] @ R.T, parent, 0, att.reach
+                    )
         return out.freeze()
 
     def _attached_items(self) -> list[_Item]:

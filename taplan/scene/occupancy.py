@@ -1,0 +1,448 @@
+"""Occupied space as voxels: a mutable grid that images and point clouds fill, and the obstacle it becomes.
+
+:class:`OccupancyGrid` is the map: a dense boolean grid over a box of the robot's root frame (``bounds``) at a
+``resolution`` [m]. Points are inserted (outside the bounds they are counted and dropped); a later depth image clears
+the occupied voxels whose centre it sees through (:meth:`OccupancyGrid.clear_seen_through`), and with ``decay`` [s]
+voxels not seen again for that long are dropped.
+
+:class:`Occupancy` is a snapshot of the map as a scene shape: every occupied voxel is an axis-aligned box of edge
+``resolution`` in the obstacle's frame. :class:`~taplan.scene.CollisionWorld` asks it for capsule distances
+(:meth:`Occupancy.capsule_distances`): per robot body the exact distance to the nearest voxel box, found through a
+broad phase of 8x8x8-voxel blocks (each block's tight bounding box gives a lower bound and, with its diagonal, an
+upper bound; only blocks below the best upper bound are opened). A segment's distance to a box is found exactly:
+the squared distance is piecewise quadratic in the segment parameter between the (at most six) face crossings.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from taplan.errors import InvalidInputError
+from taplan.scene.shapes import Shape
+
+__all__ = ["Occupancy", "OccupancyGrid", "segment_box_distance", "DEFAULT_BOUNDS", "DEFAULT_RESOLUTION"]
+
+DEFAULT_RESOLUTION = 0.02  # [m]
+# the TeleAvatar's reach in its root frame (shoulder base), with room: x forward, y left, z up [m]
+DEFAULT_BOUNDS = ((-0.6, -1.2, -1.0), (1.4, 1.2, 1.0))
+BLOCK = 8  # voxels per block edge in the broad phase
+
+
+def _bounds(bounds: Any) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        lo, hi = (np.asarray(b, dtype=float).reshape(3) for b in bounds)
+    except (TypeError, ValueError):
+        raise InvalidInputError("bounds", bounds, "((x, y, z) low, (x, y, z) high) [m]") from None
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
+        raise InvalidInputError("bounds", bounds, "finite corners with high > low on every axis [m]")
+    return lo, hi
+
+
+def _resolution(resolution: Any) -> float:
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not 0.001 <= resolution <= 0.5:
+        raise InvalidInputError("resolution", resolution, "a voxel edge in [0.001, 0.5] m")
+    return float(resolution)
+
+
+def segment_box_distance(
+    start: np.ndarray, end: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact distances between segments ``[start, end]`` and axis-aligned boxes ``[lo, hi]`` (all (N, 3)).
+
+    Returns (distance (N,), closest point on the segment (N, 3), closest point of the box (N, 3)); distance 0 when
+    the segment meets the box. The squared distance ``Σ_i max(lo_i − p_i, 0, p_i − hi_i)²`` along ``p(t)`` is a
+    quadratic between consecutive face crossings; each piece is minimised in closed form.
+    """
+    u = end - start
+    with np.errstate(divide="ignore", invalid="ignore"):
+        crossings = np.concatenate([(lo - start) / u, (hi - start) / u], axis=1)  # (N, 6)
+    crossings = np.where(np.isfinite(crossings), crossings, 0.0)
+    t = np.sort(np.clip(np.concatenate([np.zeros((len(u), 1)), np.ones((len(u), 1)), crossings], axis=1), 0, 1))
+    t0, t1 = t[:, :-1], t[:, 1:]  # (N, 7) pieces
+    mid = start[:, None, :] + ((t0 + t1) / 2)[:, :, None] * u[:, None, :]
+    below, above = mid < lo[:, None, :], mid > hi[:, None, :]
+    # on a piece, each axis contributes (alpha + beta t)^2 or nothing
+    alpha = np.where(below, (lo - start)[:, None, :], np.where(above, (start - hi)[:, None, :], 0.0))
+    beta = np.where(below, -u[:, None, :], np.where(above, u[:, None, :], 0.0))
+    A = np.einsum("npk,npk->np", beta, beta)
+    B = np.einsum("npk,npk->np", alpha, beta)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = np.where(A > 0, -B / A, t0)
+    ts = np.clip(vertex, t0, t1)
+    value = np.einsum("npk,npk->np", alpha + beta * ts[:, :, None], alpha + beta * ts[:, :, None])
+    best = ts[np.arange(len(u)), np.argmin(value, axis=1)]
+    p = start + best[:, None] * u
+    q = np.clip(p, lo, hi)
+    return np.linalg.norm(p - q, axis=1), p, q
+
+
+@dataclass(frozen=True, eq=False)
+class Occupancy(Shape):
+    """Occupied voxels as an obstacle shape: voxel ``(i, j, k)`` is the box ``origin + [i, i+1) * resolution`` (per
+    axis) in the obstacle's frame.
+
+    Attributes:
+        resolution: Voxel edge [m].
+        origin: The grid's corner [m]. Shape (3,).
+        voxels: Occupied voxel indices. Shape (N, 3), int.
+    """
+
+    resolution: float
+    origin: np.ndarray = field(repr=False)
+    voxels: np.ndarray = field(repr=False)
+    kind = "occupancy"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "resolution", _resolution(self.resolution))
+        origin = np.asarray(self.origin, dtype=float).reshape(-1)
+        if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+            raise InvalidInputError("origin", self.origin, "a finite grid corner (x, y, z) [m]")
+        voxels = np.asarray(self.voxels)
+        if voxels.size == 0:
+            voxels = np.zeros((0, 3), dtype=np.int64)
+        if voxels.ndim != 2 or voxels.shape[1] != 3 or not np.issubdtype(voxels.dtype, np.integer):
+            raise InvalidInputError("voxels", f"shape {voxels.shape} {voxels.dtype}", "(N, 3) integer indices")
+        object.__setattr__(self, "origin", origin)
+        object.__setattr__(self, "voxels", voxels.astype(np.int64))
+        self._build_blocks()
+
+    def _build_blocks(self) -> None:
+        """Sort the voxels by block and keep each block's voxel range and tight bounding box."""
+        h = self.resolution
+        block = self.voxels // BLOCK
+        order = np.lexsort((block[:, 2], block[:, 1], block[:, 0]))
+        voxels = self.voxels[order]
+        block = block[order]
+        change = np.flatnonzero(np.any(np.diff(block, axis=0) != 0, axis=1)) + 1 if len(block) else np.zeros(0, int)
+        starts = np.concatenate([[0], change]).astype(int) if len(block) else np.zeros(0, int)
+        object.__setattr__(self, "voxels", voxels)
+        lo = self.origin + voxels * h
+        block_lo = np.minimum.reduceat(lo, starts, axis=0) if len(starts) else np.zeros((0, 3))
+        block_hi = np.maximum.reduceat(lo, starts, axis=0) + h if len(starts) else np.zeros((0, 3))
+        object.__setattr__(self, "_lo", lo)
+        object.__setattr__(self, "_starts", starts)
+        object.__setattr__(self, "_counts", np.diff(np.append(starts, len(voxels))))
+        object.__setattr__(self, "_block_lo", block_lo)
+        object.__setattr__(self, "_block_hi", block_hi)
+        object.__setattr__(self, "_block_diagonal", np.linalg.norm(block_hi - block_lo, axis=1))
+
+    def __len__(self) -> int:
+        return len(self.voxels)
+
+    def centers(self) -> np.ndarray:
+        """Voxel centres [m] in the obstacle frame. Shape (N, 3)."""
+        return self._lo + self.resolution / 2
+
+    def boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per voxel its box ``(lo, hi)`` [m] in the obstacle frame; each (N, 3)."""
+        return self._lo, self._lo + self.resolution
+
+    def to_coal(self) -> Any:
+        """A coal octree of the voxel centres at this resolution (for coal-side queries and comparison)."""
+        import coal
+
+        if not len(self.voxels):
+            raise InvalidInputError("voxels", "an empty occupancy", "at least one voxel for a coal octree")
+        return coal.makeOctree(self.centers(), self.resolution)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "type": "occupancy",
+            "resolution": self.resolution,
+            "origin": self.origin.tolist(),
+            "voxels": self.voxels.tolist(),
+        }
+
+    def bounding_radius(self) -> float:
+        if not len(self.voxels):
+            return 0.0
+        corners = np.concatenate([self._lo, self._lo + self.resolution])
+        return float(np.max(np.linalg.norm(corners, axis=1)))
+
+    def capsule_distances(
+        self,
+        starts: np.ndarray,
+        ends: np.ndarray,
+        radii: np.ndarray,
+        cutoff: float = math.inf,
+        bound_beyond: float = math.inf,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per capsule (segments ``starts``-``ends`` (C, 3) in the obstacle frame, ``radii`` (C,)) its signed
+        distance [m] to the nearest voxel box, witness points on the capsule and on the box, and the unit normal
+        from the box to the capsule.
+
+        Capsules farther than ``cutoff`` report a lower bound above it; capsules whose nearest block is farther than
+        ``bound_beyond`` report that block's distance (a lower bound). A capsule whose axis enters a voxel reports
+        ``-radius`` (in collision; the depth is not computed). No voxels: ``inf`` for every capsule.
+        """
+        C = len(starts)
+        d = np.full(C, np.inf)
+        pa = np.array(starts, dtype=float)
+        pb = np.array(starts, dtype=float)
+        n = np.tile([0.0, 0.0, 1.0], (C, 1))
+        K = len(self._starts)
+        if not K or not C:
+            return d, pa, pb, n
+        # broad phase: every capsule against every block's tight box
+        ci = np.repeat(np.arange(C), K)
+        ki = np.tile(np.arange(K), C)
+        gap, p, q = segment_box_distance(starts[ci], ends[ci], self._block_lo[ki], self._block_hi[ki])
+        lower = (gap - radii[ci]).reshape(C, K)
+        upper = (gap + self._block_diagonal[ki] - radii[ci]).reshape(C, K)
+        nearest = lower.min(axis=1)
+        threshold = np.minimum(upper.min(axis=1), cutoff)
+        bounded = (nearest > threshold) | (nearest > bound_beyond)
+        if np.any(bounded):
+            k = np.argmin(lower, axis=1)
+            rows = np.flatnonzero(bounded)
+            flat = rows * K + k[rows]
+            d[rows], pa[rows], pb[rows] = nearest[rows], p[flat], q[flat]
+            n[rows] = _unit(p[flat] - q[flat])
+            pa[rows] -= radii[rows, None] * n[rows]
+        candidate = (lower <= threshold[:, None]) & ~bounded[:, None]
+        rows, blocks = np.nonzero(candidate)
+        if not len(rows):
+            return d, pa, pb, n
+        # narrow phase: the voxels of the candidate blocks, capsule-major
+        counts = self._counts[blocks]
+        owner = np.repeat(rows, counts)
+        first = np.repeat(self._starts[blocks] - np.cumsum(counts) + counts, counts)
+        voxel = first + np.arange(counts.sum())
+        lo = self._lo[voxel]
+        gap, p, q = segment_box_distance(starts[owner], ends[owner], lo, lo + self.resolution)
+        value = gap - radii[owner]
+        order = np.lexsort((value, owner))
+        head = order[np.concatenate([[True], np.diff(owner[order]) != 0])]
+        c = owner[head]
+        d[c] = value[head]
+        inside = gap[head] <= 1e-12
+        normal = _unit(p[head] - q[head])
+        centre = lo[head] + self.resolution / 2
+        normal[inside] = _unit(p[head][inside] - centre[inside])
+        n[c] = normal
+        pb[c] = q[head]
+        pa[c] = p[head] - radii[c, None] * normal
+        return d, pa, pb, n
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(norm > 1e-12, v / np.maximum(norm, 1e-12), [0.0, 0.0, 1.0])
+
+
+class OccupancyGrid:
+    """A dense occupancy map over ``bounds`` (root frame) at ``resolution`` [m].
+
+    Args:
+        resolution: Voxel edge [m] (default 2 cm).
+        bounds: ``(low corner, high corner)`` [m] of the mapped box; points outside are counted in
+            ``dropped_outside`` and ignored.
+        decay: Seconds after which a voxel not seen again is dropped (None: never).
+    """
+
+    def __init__(
+        self,
+        resolution: float = DEFAULT_RESOLUTION,
+        bounds: Any = DEFAULT_BOUNDS,
+        *,
+        decay: float | None = None,
+    ) -> None:
+        self.resolution = _resolution(resolution)
+        self.origin, high = _bounds(bounds)
+        self.shape = tuple(int(v) for v in np.ceil((high - self.origin) / self.resolution - 1e-9))
+        cells = math.prod(self.shape)
+        if cells > 200_000_000:
+            raise InvalidInputError("bounds", bounds, f"at most 2e8 voxels at {self.resolution} m (got {cells:.3g})")
+        if decay is not None and not (isinstance(decay, (int, float)) and math.isfinite(decay) and decay > 0):
+            raise InvalidInputError("decay", decay, "a positive number of seconds or None")
+        self.decay = None if decay is None else float(decay)
+        self.occupied = np.zeros(cells, dtype=bool)
+        self._scratch = np.zeros(cells, dtype=bool)  # all False between calls
+        self.seen = np.zeros(cells, dtype=np.float64) if self.decay is not None else None
+        self._strides = np.array([self.shape[1] * self.shape[2], self.shape[2], 1], dtype=np.int64)
+        self.dropped_outside = 0
+        self.version = 0
+
+    def __len__(self) -> int:
+        return int(np.count_nonzero(self.occupied))
+
+    # ------------------------------------------------------------------------------------------------ indexing
+    def keys(self, points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Linear voxel keys of the points (N, 3) [m, root frame] inside the bounds, and the mask of those points."""
+        P = np.asarray(points)
+        cell = np.floor((P - self.origin) * (1.0 / self.resolution)).astype(np.int64)
+        inside = np.all((cell >= 0) & (cell < self.shape), axis=1)
+        return cell[inside] @ self._strides, inside
+
+    def indices(self, keys: np.ndarray) -> np.ndarray:
+        """Voxel indices (N, 3) of linear keys."""
+        return np.stack(np.unravel_index(keys, self.shape), axis=1).astype(np.int64)
+
+    def centers(self, keys: np.ndarray) -> np.ndarray:
+        return self.origin + (self.indices(keys) + 0.5) * self.resolution
+
+    def occupied_keys(self) -> np.ndarray:
+        return np.flatnonzero(self.occupied)
+
+    # ------------------------------------------------------------------------------------------------- updates
+    def insert(self, points: npt.ArrayLike, stamp: float = 0.0, *, exclude: np.ndarray | None = None) -> int:
+        """Mark the voxels of ``points`` (N, 3) [m, root frame] occupied; ``exclude``: keys of voxels whose points
+        are dropped (the robot's own, :meth:`near_segments`). Returns the number of points kept."""
+        P = np.asarray(points)
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise InvalidInputError("points", f"shape {P.shape}", "(N, 3) positions [m]")
+        if not np.issubdtype(P.dtype, np.floating):
+            P = P.astype(float)
+        finite = np.all(np.isfinite(P), axis=1)
+        if not np.all(finite):
+            P = P[finite]
+        keys, inside = self.keys(P)
+        self.dropped_outside += int(len(P) - len(keys))
+        if exclude is not None and len(exclude):
+            self._scratch[exclude] = True
+            keys = keys[~self._scratch[keys]]
+            self._scratch[exclude] = False
+        self.occupied[keys] = True
+        if self.seen is not None:
+            self.seen[keys] = stamp
+        self.version += 1
+        return len(keys)
+
+    def insert_image(
+        self,
+        depth: np.ndarray,
+        ray_x: np.ndarray,
+        ray_y: np.ndarray,
+        T_root_camera: np.ndarray,
+        stamp: float = 0.0,
+        *,
+        exclude: np.ndarray | None = None,
+        thickness: float = 0.0,
+    ) -> tuple[int, int]:
+        """Mark the voxels a depth image (metres, NaN = no measurement) hits: pixel ``(row, col)`` is the point
+        ``depth * (ray_x[col], ray_y[row], 1)`` of the camera at ``T_root_camera``. Separable rays make each root
+        coordinate one multiply-add over the image, without forming the (N, 3) points. With ``thickness`` [m] the
+        points up to that depth behind each hit are occupied too (every half voxel): surfaces are taken as solids
+        at least that thick. Returns (measured, kept) pixels."""
+        R, t = T_root_camera[:3, :3], T_root_camera[:3, 3]
+        inv = 1.0 / self.resolution
+        valid = np.isfinite(depth)
+        measured = int(np.count_nonzero(valid))
+        steps = int(math.ceil(thickness / (self.resolution / 2) - 1e-9)) if thickness > 0 else 0
+        slopes = []
+        for k in range(3):
+            # voxel coordinate along axis k, in voxel units: (depth * (R_k . ray) + t_k - origin_k) / h
+            row = ((R[k, 1] * ray_y + R[k, 2]) * inv).astype(np.float32)[:, None]
+            col = (R[k, 0] * ray_x * inv).astype(np.float32)[None, :]
+            slopes.append(row + col)
+        found = []
+        kept_pixels = 0
+        for layer in range(steps + 1):
+            shifted = depth + np.float32(min(layer * self.resolution / 2, thickness)) if layer else depth
+            inside = valid.copy()
+            cells = []
+            for k in range(3):
+                f = shifted * slopes[k]
+                f += np.float32((t[k] - self.origin[k]) * inv)
+                inside &= (f >= 0) & (f < self.shape[k])
+                cells.append(f)
+            keys = np.zeros(int(np.count_nonzero(inside)), dtype=np.int64)
+            for k in range(3):
+                keys += cells[k][inside].astype(np.int64) * self._strides[k]
+            if not layer:
+                kept_pixels = len(keys)
+            found.append(keys)
+        keys = np.concatenate(found) if steps else found[0]
+        self.dropped_outside += measured - kept_pixels
+        if exclude is not None and len(exclude):
+            self._scratch[exclude] = True
+            keys = keys[~self._scratch[keys]]
+            self._scratch[exclude] = False
+        self.occupied[keys] = True
+        if self.seen is not None:
+            self.seen[keys] = stamp
+        self.version += 1
+        return measured, kept_pixels
+
+    def clear_keys(self, keys: np.ndarray) -> None:
+        self.occupied[keys] = False
+        self.version += 1
+
+    def clear(self) -> None:
+        """Forget everything."""
+        self.occupied[:] = False
+        self.version += 1
+
+    def clear_seen_through(
+        self,
+        depth: np.ndarray,
+        intrinsics: tuple[float, float, float, float],
+        T_root_camera: np.ndarray,
+        margin: float,
+    ) -> int:
+        """Free the occupied voxels a depth image (metres, invalid pixels NaN) sees through: the voxel's centre
+        projects onto a valid pixel whose depth is more than ``margin`` [m] beyond it. Returns how many."""
+        keys = self.occupied_keys()
+        if not len(keys):
+            return 0
+        fx, fy, cx, cy = intrinsics
+        R, t = T_root_camera[:3, :3], T_root_camera[:3, 3]
+        local = (self.centers(keys) - t) @ R  # camera frame
+        z = local[:, 2]
+        ahead = z > 1e-6
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.floor(fx * local[:, 0] / z + cx)
+            v = np.floor(fy * local[:, 1] / z + cy)
+        H, W = depth.shape
+        visible = ahead & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+        rows = np.flatnonzero(visible)
+        measured = depth[v[rows].astype(int), u[rows].astype(int)]
+        free = rows[np.isfinite(measured) & (measured > z[rows] + margin)]
+        self.clear_keys(keys[free])
+        return len(free)
+
+    def expire(self, now: float) -> int:
+        """With ``decay``: drop voxels last seen before ``now - decay``. Returns how many."""
+        if self.seen is None:
+            return 0
+        old = self.occupied & (self.seen < now - self.decay)
+        count = int(np.count_nonzero(old))
+        if count:
+            self.occupied[old] = False
+            self.version += 1
+        return count
+
+    def near_segments(self, starts: np.ndarray, ends: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """Keys of the voxels whose box may come within ``radii`` [m] of a segment (the robot's bodies plus
+        padding): the voxel's centre is within ``radius + half diagonal``. Every point within ``radius`` of a segment
+        falls in one of them."""
+        found = []
+        half = self.resolution * math.sqrt(3) / 2
+        h = self.resolution
+        for s, e, r in zip(
+            np.asarray(starts, dtype=float), np.asarray(ends, dtype=float), np.asarray(radii), strict=True
+        ):
+            reach = float(r) + half
+            lo = np.maximum(np.floor((np.minimum(s, e) - reach - self.origin) / h).astype(int), 0)
+            hi = np.minimum(np.floor((np.maximum(s, e) + reach - self.origin) / h).astype(int) + 1, self.shape)
+            if np.any(hi <= lo):
+                continue
+            # voxel centres relative to the segment start, one axis per array dimension (broadcast, no grid)
+            x, y, z = (self.origin[k] + (np.arange(lo[k], hi[k]) + 0.5) * h - s[k] for k in range(3))
+            x, y, z = x[:, None, None], y[None, :, None], z[None, None, :]
+            u = e - s
+            length2 = float(u @ u)
+            t = np.clip((x * u[0] + y * u[1] + z * u[2]) / length2, 0.0, 1.0) if length2 > 1e-18 else 0.0
+            near = (x - t * u[0]) ** 2 + (y - t * u[1]) ** 2 + (z - t * u[2]) ** 2 <= reach * reach
+            i, j, k = np.nonzero(near)
+            found.append((i + lo[0]) * self._strides[0] + (j + lo[1]) * self._strides[1] + (k + lo[2]))
+        return np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
+
+    def snapshot(self) -> Occupancy:
+        """The occupied voxels now, as an obstacle shape in the root frame."""
+        return Occupancy(self.resolution, self.origin.copy(), self.indices(self.occupied_keys()))

@@ -1,0 +1,276 @@
+"""Perceived geometry: depth images and point clouds fused into an occupancy obstacle of a :class:`Scene`.
+
+:class:`Perception` owns an :class:`~taplan.scene.occupancy.OccupancyGrid` and keeps one obstacle (``name``,
+default ``"perceived"``) of its scene equal to the grid's occupied voxels, so everything that evaluates the scene
+(:class:`~taplan.scene.CollisionWorld`: the optimiser, IK dampers, planners, certificates) respects what was seen.
+
+An image is placed by the camera's pose at its capture time: forward kinematics of the camera frame at the
+configuration the robot had then (:class:`JointHistory` interpolates recorded joint states). Before its points are
+inserted, the voxels the image sees through are freed, and points on the robot's own bodies (each capsule plus
+``padding``, at that configuration) are dropped. The core is pure: time is a parameter, nothing runs by itself.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from taplan.errors import InvalidInputError
+from taplan.scene.camera import TELEAVATAR_CAMERAS, CameraMount, PinholeCamera, add_camera_frames, depth_to_metres
+from taplan.scene.occupancy import DEFAULT_BOUNDS, DEFAULT_RESOLUTION, Occupancy, OccupancyGrid
+from taplan.scene.robot_bodies import robot_bodies
+from taplan.scene.scene import Scene, as_pose
+
+__all__ = ["Perception", "JointHistory", "Integration"]
+
+
+class JointHistory:
+    """Recent configurations by time, for the configuration at a sensor's capture time.
+
+    Args:
+        horizon: Seconds of history kept [s].
+        tolerance: How far past the newest state a stamp may be and still use it [s].
+    """
+
+    def __init__(self, horizon: float = 5.0, tolerance: float = 0.05) -> None:
+        self.horizon = float(horizon)
+        self.tolerance = float(tolerance)
+        self._stamps: deque[float] = deque()
+        self._states: deque[np.ndarray] = deque()
+
+    def __len__(self) -> int:
+        return len(self._stamps)
+
+    def add(self, stamp: float, q: npt.ArrayLike) -> None:
+        """Record configuration ``q`` at ``stamp`` [s] (stamps must not go back)."""
+        if not math.isfinite(stamp) or (self._stamps and stamp < self._stamps[-1]):
+            raise InvalidInputError("stamp", stamp, "a finite time not before the previous joint state")
+        self._stamps.append(float(stamp))
+        self._states.append(np.array(q, dtype=float))
+        while self._stamps and self._stamps[0] < stamp - self.horizon:
+            self._stamps.popleft()
+            self._states.popleft()
+
+    def at(self, stamp: float) -> np.ndarray:
+        """The configuration at ``stamp`` [s], linearly interpolated between the recorded ones."""
+        if not self._stamps:
+            raise InvalidInputError("stamp", stamp, "a time after a joint state was received (none yet)")
+        first, last = self._stamps[0], self._stamps[-1]
+        if not (first <= stamp <= last + self.tolerance):
+            raise InvalidInputError("stamp", stamp, f"a time within the joint states' [{first:.3f}, {last:.3f}] s")
+        if stamp >= last:
+            return self._states[-1].copy()
+        k = bisect.bisect_right(self._stamps, stamp)  # deque supports indexing; stamps are sorted
+        t0, t1 = self._stamps[k - 1], self._stamps[k]
+        s = 0.0 if t1 <= t0 else (stamp - t0) / (t1 - t0)
+        return (1 - s) * self._states[k - 1] + s * self._states[k]
+
+
+@dataclass(frozen=True)
+class Integration:
+    """What one image or cloud did: points it measured, points kept after the robot and the bounds, voxels it
+    freed, and the camera (or cloud frame) pose used (4x4)."""
+
+    measured: int
+    kept: int
+    cleared: int
+    pose: np.ndarray
+
+
+class Perception:
+    """Fuse depth images and point clouds into ``scene`` (a new one when None).
+
+    Args:
+        robot: The robot (camera frames are added to its model).
+        scene: The scene that gets the occupancy obstacle ``name``.
+        resolution: Voxel edge [m]; bounds: the mapped box of the root frame [m]; decay: see
+            :class:`~taplan.scene.occupancy.OccupancyGrid`.
+        padding: Points within a robot body's radius plus this [m] are the robot's own and dropped.
+        min_range, max_range: Depths outside are no measurement [m].
+        clear_margin: A voxel is freed when an image sees at least this much beyond its centre [m] (default two
+            voxels: depth noise and the voxel's own extent).
+        thickness: Depth [m] behind each depth-image hit that is occupied too (surfaces taken as solids at least
+            that thick; 0: the hit's voxel only).
+        cameras: Mounts to add as frames (default: the TeleAvatar's wrist cameras when the model is the
+            TeleAvatar's, else none).
+    """
+
+    def __init__(
+        self,
+        robot: Any,
+        scene: Scene | None = None,
+        *,
+        name: str = "perceived",
+        resolution: float = DEFAULT_RESOLUTION,
+        bounds: Any = DEFAULT_BOUNDS,
+        padding: float = 0.02,
+        min_range: float = 0.05,
+        max_range: float = 3.0,
+        clear_margin: float | None = None,
+        decay: float | None = None,
+        thickness: float = 0.0,
+        cameras: dict[str, CameraMount] | None = None,
+    ) -> None:
+        if not (isinstance(padding, (int, float)) and math.isfinite(padding) and padding >= 0):
+            raise InvalidInputError("padding", padding, "a distance >= 0 [m]")
+        if not (0 <= min_range < max_range) or not math.isfinite(min_range):
+            raise InvalidInputError("min_range/max_range", (min_range, max_range), "0 <= min_range < max_range [m]")
+        self.robot = robot
+        self.scene = scene if scene is not None else Scene()
+        self.name = name
+        self.grid = OccupancyGrid(resolution, bounds, decay=decay)
+        self.padding = float(padding)
+        if not (isinstance(thickness, (int, float)) and 0 <= thickness <= 1):
+            raise InvalidInputError("thickness", thickness, "a depth in [0, 1] m")
+        self.thickness = float(thickness)
+        self.min_range, self.max_range = float(min_range), float(max_range)
+        self.clear_margin = 2 * self.grid.resolution if clear_margin is None else float(clear_margin)
+        if cameras is None:
+            cameras = TELEAVATAR_CAMERAS if {"Link-L7", "Link-R7"} <= set(robot.frame_names) else {}
+        self.cameras = add_camera_frames(robot, cameras)
+        self.bodies = robot_bodies(robot)
+        self.history = JointHistory()
+        self._data = robot.model.createData()
+        self._published = -1
+        self._fixed_keys: np.ndarray | None = None
+
+    # -------------------------------------------------------------------------------------------- geometry
+    def _configuration(self, q: npt.ArrayLike | None, stamp: float | None) -> np.ndarray:
+        if q is None:
+            if stamp is None:
+                raise InvalidInputError("q", None, "a configuration, or a stamp with joint states in the history")
+            return self.history.at(stamp)
+        return self.robot.check_configuration(q)
+
+    def frame_pose(self, frame: str, q: npt.ArrayLike) -> np.ndarray:
+        """``T_root_frame`` of a robot frame (e.g. a camera's) at ``q``."""
+        frame_id = self.robot.frame_id(frame)
+        pin.framesForwardKinematics(self.robot.model, self._data, np.asarray(q, dtype=float))
+        return self._data.oMf[frame_id].homogeneous.copy()
+
+    def robot_segments(self, q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The robot's bodies at ``q``: segment starts, ends (B, 3) [m, root frame] and radii (B,)."""
+        pin.forwardKinematics(self.robot.model, self._data, np.asarray(q, dtype=float))
+        starts = np.array([self._data.oMi[b.joint].act(b.start) for b in self.bodies]).reshape(-1, 3)
+        ends = np.array([self._data.oMi[b.joint].act(b.end) for b in self.bodies]).reshape(-1, 3)
+        return starts, ends, np.array([b.radius for b in self.bodies])
+
+    def _own_voxels(self, q: np.ndarray) -> np.ndarray:
+        """Keys of the voxels within padding of the robot's bodies at ``q`` (bodies fixed to the root: once)."""
+        starts, ends, radii = self.robot_segments(q)
+        fixed = np.array([b.joint == 0 for b in self.bodies], dtype=bool)
+        if self._fixed_keys is None:
+            self._fixed_keys = self.grid.near_segments(starts[fixed], ends[fixed], radii[fixed] + self.padding)
+        moving = self.grid.near_segments(starts[~fixed], ends[~fixed], radii[~fixed] + self.padding)
+        return np.concatenate([self._fixed_keys, moving])
+
+    def _pose(self, frame: str | None, T: Any, q: np.ndarray, what: str) -> np.ndarray:
+        if T is not None:
+            return as_pose(T, what)
+        if frame is None:
+            raise InvalidInputError("frame", None, f"the {what} frame (a robot frame such as a camera's) or {what}")
+        return self.frame_pose(frame, q)
+
+    # ------------------------------------------------------------------------------------------ integration
+    def integrate_depth(
+        self,
+        image: Any,
+        camera: PinholeCamera | dict[str, Any],
+        *,
+        frame: str | None = None,
+        q: npt.ArrayLike | None = None,
+        stamp: float | None = None,
+        encoding: str | None = None,
+        T_root_camera: Any = None,
+        step: int | None = None,
+        big_endian: bool = False,
+    ) -> Integration:
+        """Fuse one depth image.
+
+        Args:
+            image: An array (height, width): float metres (``32FC1``) or uint16 millimetres (``16UC1``), or an
+                Image message's ``bytes`` with ``encoding``, ``step`` and ``big_endian``.
+            camera: Its intrinsics (a :class:`PinholeCamera` or CameraInfo fields).
+            frame: The camera's frame in the robot model (e.g. ``"left_depth_camera"``), posed by FK at the
+                capture configuration; or give ``T_root_camera`` (4x4) directly.
+            q: The configuration at capture time; None: from :attr:`history` at ``stamp``.
+            stamp: Capture time [s] (also the voxels' "seen" time for ``decay``).
+        """
+        camera = camera if isinstance(camera, PinholeCamera) else PinholeCamera.from_camera_info(camera)
+        if encoding is None:
+            dtype = getattr(image, "dtype", None)
+            if dtype is None or dtype.kind not in "uf":
+                raise InvalidInputError("encoding", None, "16UC1 or 32FC1 for raw image bytes")
+            encoding = "16UC1" if dtype.kind == "u" else "32FC1"
+        depth = depth_to_metres(
+            image,
+            encoding,
+            camera,
+            min_range=self.min_range,
+            max_range=self.max_range,
+            big_endian=big_endian,
+            step=step,
+        )
+        q_capture = self._configuration(q, stamp)
+        T = self._pose(frame, T_root_camera, q_capture, "T_root_camera")
+        cleared = self.grid.clear_seen_through(depth, camera.intrinsics, T, self.clear_margin)
+        ray_x, ray_y = camera.ray_components()
+        measured, kept = self.grid.insert_image(
+            depth,
+            ray_x,
+            ray_y,
+            T,
+            0.0 if stamp is None else stamp,
+            exclude=self._own_voxels(q_capture),
+            thickness=self.thickness,
+        )
+        return Integration(measured, kept, cleared, T)
+
+    def integrate_points(
+        self,
+        points: npt.ArrayLike,
+        *,
+        frame: str | None = None,
+        q: npt.ArrayLike | None = None,
+        stamp: float | None = None,
+        T_root_frame: Any = None,
+    ) -> Integration:
+        """Fuse a point cloud (N, 3) [m] given in ``frame`` (a robot frame posed by FK at the capture configuration;
+        the root frame when neither ``frame`` nor ``T_root_frame`` is given). NaN points are skipped. Clouds add
+        occupancy only; use ``decay`` to forget what is no longer there."""
+        P = np.asarray(points, dtype=float)
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise InvalidInputError("points", f"shape {P.shape}", "(N, 3) positions [m]")
+        q_capture = self._configuration(q, stamp)
+        T = (
+            np.eye(4)
+            if frame is None and T_root_frame is None
+            else self._pose(frame, T_root_frame, q_capture, "T_root_frame")
+        )
+        world = P @ T[:3, :3].T + T[:3, 3]
+        kept = self.grid.insert(world, 0.0 if stamp is None else stamp, exclude=self._own_voxels(q_capture))
+        return Integration(len(P), kept, 0, T)
+
+    def expire(self, now: float) -> int:
+        """Drop voxels older than the grid's ``decay`` at time ``now`` [s]."""
+        return self.grid.expire(now)
+
+    def occupancy(self) -> Occupancy:
+        return self.grid.snapshot()
+
+    def update_scene(self) -> Occupancy | None:
+        """Put the occupied voxels into the scene as obstacle ``name`` (only when the grid changed). Returns the
+        new shape, or None when nothing changed."""
+        if self.grid.version == self._published:
+            return None
+        shape = self.grid.snapshot()
+        self.scene.put(self.name, shape)
+        self._published = self.grid.version
+        return shape
