@@ -170,7 +170,7 @@ class Viewer:
         motions: Motions replayed together on one clock (a plan; a bag's commanded and measured streams).
         host: Interface to serve on (default 127.0.0.1: this machine only).
         port: TCP port (0: any free port). A port in use raises :class:`~taplan.errors.InvalidInputError`.
-        rate: Playback update rate [Hz].
+        rate: Playback update rate [Hz] (60: a browser's frame rate; at least 30 under load).
         live: Names of robots posed from outside (:meth:`set_configuration`), e.g. ``("live",)``.
         hands: Draw the groups' end-effector frames.
 
@@ -186,7 +186,7 @@ class Viewer:
         *,
         host: str = "127.0.0.1",
         port: int = DEFAULT_PORT,
-        rate: float = 30.0,
+        rate: float = 60.0,
         live: Sequence[str] = (),
         hands: bool = True,
     ) -> None:
@@ -466,9 +466,11 @@ class Viewer:
 
     def _playback(self) -> None:
         period = 1.0 / self.rate
-        last = time.monotonic()
-        while not self._stop.wait(max(0.0, last + period - time.monotonic())):
+        last = deadline = time.monotonic()
+        while not self._stop.wait(max(0.0, deadline - time.monotonic())):
             now = time.monotonic()
+            # a fixed grid of wake-ups: late wake-ups do not lower the rate; after a stall, start a new grid
+            deadline = deadline + period if now - deadline < period else now + period
             dt, last = now - last, now
             if self.playing and self.motions:
                 try:
