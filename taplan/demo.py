@@ -258,7 +258,8 @@ def write_outputs(
     plots: bool,
     say: Callable[[str], None],
 ) -> list[Path]:
-    """Trajectories (exact JSON, and CSV sampled at 100 Hz), the report (JSON) and plots (PNG)."""
+    """Trajectories (exact JSON, and CSV sampled at 100 Hz), the report (JSON), the scene plan as a self-contained
+    3D page (HTML) and plots (PNG)."""
     import json
 
     files: list[Path] = []
@@ -276,6 +277,12 @@ def write_outputs(
     path = out / "report.json"
     path.write_text(json.dumps(payload, indent=1, default=float))
     files.append(path)
+    scene_plan = next((plan for plan in plans if plan.name == "scene"), None)
+    if scene_plan is not None:  # the scene plan in 3D: a page that opens in a browser without a server
+        from taplan.scene import load_scene
+        from taplan.viz import write_html
+
+        files.append(write_html(out / "scene.html", scene_plan.trajectory, scene=load_scene(SCENE_FILE), robot=robot))
     if plots:
         from taplan.plots import save_profiles
 

@@ -64,7 +64,7 @@ def test_guide_linear_interpolation_has_velocity_steps_taplan_does_not(demo):
 
 def test_outputs_are_written(demo):
     names = {p.name for p in demo.files}
-    assert {"reach_100hz.csv", "line_100hz.csv", "pick_100hz.csv", "report.json"} <= names
+    assert {"reach_100hz.csv", "line_100hz.csv", "pick_100hz.csv", "report.json", "scene.html"} <= names
     report = json.loads((demo.out_dir / "report.json").read_text())
     assert set(report["plans"]) == {"reach", "line", "pick", "scene"}
     reloaded = taplan.Trajectory.load(demo.out_dir / "pick_100hz.csv")

@@ -3,7 +3,8 @@
 Three jerk-limited plans (a dual-arm reach to two end-effector poses, a dual-arm Cartesian straight line, a pick
 with straight descent and lift) are replayed through the reference controllers and checked against the hardware
 limits; the robot guide's own approaches (linear interpolation at 50 Hz, the clipped P-controller) run on the same
-motion for comparison. Report, plots (PNG) and trajectories go into the output folder.
+motion for comparison. Report, plots (PNG), trajectories and a 3D page of the scene plan (``scene.html``, opens
+without a server) go into the output folder.
 """
 
 from __future__ import annotations

@@ -64,8 +64,10 @@ def _display_in_notebook(viewer: Viewer, height: int) -> None:
         from IPython import get_ipython
         from IPython.display import IFrame, display
     except ImportError:
+        print(f"taplan.viz: open {viewer.url}", flush=True)
         return
     if get_ipython() is None:
+        print(f"taplan.viz: open {viewer.url}", flush=True)
         return
     display(IFrame(viewer.url, width="100%", height=height))
 

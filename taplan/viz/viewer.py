@@ -16,6 +16,7 @@ the closest pair and the joints' velocities and accelerations against the robot'
 from __future__ import annotations
 
 import contextlib
+import io
 import logging
 import math
 import socket
@@ -208,7 +209,8 @@ class Viewer:
         self.robot = robot
         self.world = CollisionWorld(robot, scene)
         self.rate = float(rate)
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print our own URL
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
         if port and self.server.get_port() != port:  # taken between our check and viser's bind
             self.server.stop()
             raise InvalidInputError("port", port, f"a free port on {host} (it is in use)")
@@ -381,11 +383,20 @@ class Viewer:
 
     def closest(self, q: np.ndarray) -> tuple[float, tuple[str, str], np.ndarray, np.ndarray] | None:
         """The closest active pair at ``q`` within the cutoff: (clearance [m], names, witness a, witness b)."""
-        d = self.world.distances(q, cutoff=_CLEARANCE_CUTOFF, jacobian=False)
+        self._distances = d = self.world.distances(q, cutoff=_CLEARANCE_CUTOFF, jacobian=False)
         if not len(d):
             return None
         k = int(np.argmin(d.distance))
         return float(d.distance[k]), d.pairs[k], d.point_a[k], d.point_b[k]
+
+    def _closest_to_scene(self) -> str:
+        """The closest robot-obstacle pair of the last evaluation, as a GUI line ("" when none)."""
+        d = self._distances
+        scene = [k for k, (_, b) in enumerate(d.pairs) if b in self.obstacles]
+        if not scene:
+            return ""
+        k = min(scene, key=lambda i: d.distance[i])
+        return f"\n\nto the scene: {d.pairs[k][0]} / {d.pairs[k][1]}: {d.distance[k] * 1e3:.1f} mm"
 
     def _node_of(self, name: str, member: str) -> Any:
         return self.robots[name].bodies.get(member, self.obstacles.get(member))
@@ -428,7 +439,9 @@ class Viewer:
                 self._highlighted[name].append((node, tuple(node.color)))
                 node.color = _HIGHLIGHT
         if box is not None:
-            box.content = f"**closest pair**: {pair[0]} / {pair[1]}: **{clearance * 1e3:.1f} mm**"
+            box.content = f"**closest pair**: {pair[0]} / {pair[1]}: **{clearance * 1e3:.1f} mm**" + (
+                self._closest_to_scene()
+            )
 
     def _show_limits(self, name: str, v: np.ndarray, a: np.ndarray) -> None:
         box = self.gui.get(f"{name}/limits")
@@ -537,7 +550,7 @@ class Viewer:
         self._stop.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=2.0)
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(Exception), contextlib.redirect_stdout(io.StringIO()):
             self.server.stop()
 
     def __enter__(self) -> Viewer:
