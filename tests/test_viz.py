@@ -381,3 +381,36 @@ def test_cli_serves_prints_the_url_and_stops_cleanly_on_ctrl_c(tmp_path, teleava
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=30)
     assert process.returncode == 0 and "Traceback" not in err and "stopped" in out
+
+
+_ARM_URDF = """<robot name="arm">
+  <link name="base_link"/>
+  <link name="link1">
+    <visual><origin xyz="0 0 0.1" rpy="0 0 0.5"/><geometry><mesh filename="package://pkg/meshes/link1.stl"/></geometry></visual>
+    <visual><geometry><mesh filename="package://pkg/meshes/missing.stl"/></geometry></visual>
+    <collision><origin xyz="0 0 0.15"/><geometry><cylinder radius="0.03" length="0.3"/></geometry></collision>
+  </link>
+  <joint name="j1" type="revolute"><parent link="base_link"/><child link="link1"/><origin xyz="0 0 0.2"/>
+    <axis xyz="1 0 0"/><limit lower="-2" upper="2" velocity="1" effort="1"/></joint>
+</robot>"""
+
+
+def test_visual_meshes_are_drawn_when_the_files_exist(tmp_path) -> None:
+    import trimesh
+
+    folder = tmp_path / "pkg"
+    (folder / "meshes").mkdir(parents=True)
+    trimesh.creation.box((0.1, 0.2, 0.3)).export(folder / "meshes" / "link1.stl")
+    (folder / "arm.urdf").write_text(_ARM_URDF)
+    robot = taplan.Robot.from_urdf(folder / "arm.urdf")
+    motion = viz.Motion.from_trajectory(robot, Trajectory([0.0, 1.0], [[0.0], [1.2]], joint_names=("j1",)))
+    with contextlib.redirect_stdout(io.StringIO()), viz.Viewer(robot, None, [motion], port=0) as v:
+        assert v.skipped_visuals == ["package://pkg/meshes/missing.stl (not found)"]
+        v.set_time(0.5)
+        node = v.nodes()["/robots/plan/j1/visual_link1_0"]
+        extent = node.vertices.max(axis=0) - node.vertices.min(axis=0)
+        np.testing.assert_allclose(extent, [0.1, 0.2, 0.3], atol=1e-6)  # the STL's box, metres
+        T_link = robot.frame_pose(motion.joints(0.5)[0], "link1")
+        expected = T_link @ np.block([[pin.rpy.rpyToMatrix(0, 0, 0.5), np.array([[0, 0, 0.1]]).T], [0, 0, 0, 1]])
+        np.testing.assert_allclose(v.world_pose("/robots/plan/j1/visual_link1_0"), expected, atol=POSE_TOL)
+        assert "visuals" in v.gui

@@ -91,6 +91,11 @@ def run(args: argparse.Namespace) -> int:
             follower = _start_live(args, viewer)
         if args.play:
             viewer.play()
+        if viewer.skipped_visuals:
+            print(
+                f"taplan view: {len(viewer.skipped_visuals)} visual mesh file(s) missing or unreadable (first: "
+                f"{viewer.skipped_visuals[0]}); drawing the collision bodies"
+            )
         what = ", ".join(f"{m.name} {m.duration:.2f} s" for m in motions) or "live joint states"
         print(f"taplan view: {what} at {viewer.url} (Ctrl-C to stop)", flush=True)
         _wait(args.duration)

@@ -34,6 +34,7 @@ from taplan.scene import CollisionWorld, Scene
 from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Mesh, Shape, Sphere
 from taplan.viz.geometry import capsule_mesh, cylinder_mesh, half_space_slab, segment_pose, wxyz
 from taplan.viz.motion import Motion
+from taplan.viz.visuals import VisualMesh, visual_meshes
 
 __all__ = ["Viewer", "DEFAULT_PORT", "check_port"]
 
@@ -41,6 +42,7 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_PORT = 8080
 _OBSTACLE_COLOR = (200, 170, 120)
+_VISUAL_COLOR = (190, 190, 195)
 _HIGHLIGHT = (230, 40, 40)
 _PATH_COLORS = ((30, 160, 90), (150, 60, 200))
 _PATH_SAMPLES = 200  # points per swept path: 5 cm apart at most for a 10 m/s... far more than a hand moves
@@ -127,7 +129,15 @@ def occupancy_cells(scene: Scene) -> tuple[np.ndarray, float] | None:
 class _RobotDrawing:
     """One robot in the scene graph: joint frames posed by FK, bodies, hand frames and attached objects."""
 
-    def __init__(self, server: Any, world: CollisionWorld, prefix: str, color: tuple[int, int, int], hands: bool):
+    def __init__(
+        self,
+        server: Any,
+        world: CollisionWorld,
+        prefix: str,
+        color: tuple[int, int, int],
+        hands: bool,
+        visuals: Sequence[VisualMesh] = (),
+    ):
         robot = world.robot
         self.model = robot.model
         self.data = robot.model.createData()
@@ -141,6 +151,22 @@ class _RobotDrawing:
             shape, pose = _body_shape(body)
             node = f"{prefix}/{self.model.names[body.joint]}/{body.name}"
             self.bodies[body.name] = _add_shape(server, node, shape, pose, color)
+        self.visuals: list[Any] = []
+        for k, mesh in enumerate(visuals):
+            if not self.model.existFrame(mesh.link):
+                continue
+            f = self.model.frames[self.model.getFrameId(mesh.link)]
+            q, p = _pose_parts(f.placement.homogeneous @ mesh.pose)
+            self.visuals.append(
+                server.scene.add_mesh_simple(
+                    f"{prefix}/{self.model.names[f.parentJoint]}/visual_{mesh.link}_{k}",
+                    mesh.vertices.astype(np.float32),
+                    mesh.faces.astype(np.uint32),
+                    color=_VISUAL_COLOR,
+                    wxyz=q,
+                    position=p,
+                )
+            )
         self.hands: dict[str, Any] = {}
         frames = [g.ee_frame for g in robot.groups.values()] if hands else []
         for frame in frames:
@@ -258,14 +284,17 @@ class Viewer:
             scene.add_point_cloud(
                 "/scene/occupancy", cells[0], colors=(120, 120, 120), point_size=cells[1], point_shape="square"
             )
+        meshes, self.skipped_visuals = visual_meshes(self.robot.urdf_path)
         palette = [(90, 140, 220), (235, 150, 60), (120, 190, 120)]
         self.robots: dict[str, _RobotDrawing] = {}
         self._live_state: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for motion in self.motions:
-            self.robots[motion.name] = _RobotDrawing(server, self.world, f"/robots/{motion.name}", motion.color, hands)
+            self.robots[motion.name] = _RobotDrawing(
+                server, self.world, f"/robots/{motion.name}", motion.color, hands, meshes
+            )
         for k, name in enumerate(live):
             color = palette[(len(self.motions) + k) % len(palette)]
-            self.robots[name] = _RobotDrawing(server, self.world, f"/robots/{name}", color, hands)
+            self.robots[name] = _RobotDrawing(server, self.world, f"/robots/{name}", color, hands, meshes)
             home = self.robot.home.copy()
             self._live_state[name] = (home, np.zeros_like(home), np.zeros_like(home))
         self._closest: dict[str, tuple[Any, Any]] = {}
@@ -339,6 +368,22 @@ class Viewer:
                 self.loop = bool(self.gui["loop"].value)
 
         self.gui["closest"] = gui.add_checkbox("closest pair", True)
+        self.gui["bodies"] = gui.add_checkbox("collision bodies", True)
+
+        @self.gui["bodies"].on_update
+        def _(event: Any) -> None:
+            for drawing in self.robots.values():
+                for handle in drawing.bodies.values():
+                    handle.visible = bool(self.gui["bodies"].value)
+
+        if any(drawing.visuals for drawing in self.robots.values()):
+            self.gui["visuals"] = gui.add_checkbox("visual meshes", True)
+
+            @self.gui["visuals"].on_update
+            def _(event: Any) -> None:
+                for drawing in self.robots.values():
+                    for handle in drawing.visuals:
+                        handle.visible = bool(self.gui["visuals"].value)
 
         @self.gui["closest"].on_update
         def _(event: Any) -> None:
