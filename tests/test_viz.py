@@ -414,3 +414,30 @@ def test_visual_meshes_are_drawn_when_the_files_exist(tmp_path) -> None:
         expected = T_link @ np.block([[pin.rpy.rpyToMatrix(0, 0, 0.5), np.array([[0, 0, 0.1]]).T], [0, 0, 0, 1]])
         np.testing.assert_allclose(v.world_pose("/robots/plan/j1/visual_link1_0"), expected, atol=POSE_TOL)
         assert "visuals" in v.gui
+
+
+def test_live_view_follows_a_simulated_robot_over_dds(teleavatar) -> None:
+    import random
+
+    from taplan.ros.dds import DdsInterface, loopback_config
+    from taplan.ros.sim import SimulatedRobot
+
+    domain = random.randint(100, 230)  # other test runs on this machine use other domains
+    q = teleavatar.home.copy()
+    q[teleavatar.group("left").indices] = [0.6, 0.8, -0.3, 1.4, 0.0, -0.3, 0.0]
+    sim = SimulatedRobot(DdsInterface(domain, config=loopback_config()), teleavatar, initial=q)
+    stop = sim.start()
+    listener = DdsInterface(domain, config=loopback_config())
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), viz.Viewer(teleavatar, None, live=("live",), port=0) as v:
+            follower = LiveFollower(v, listener)
+            deadline = time.monotonic() + 15.0  # DDS discovery on loopback, under load
+            while len(follower._stamp) < 2 and time.monotonic() < deadline:
+                follower.step()
+                time.sleep(0.01)
+            follower.step()
+            T = v.world_pose("/robots/live/l_joint7/hand_left_ee")
+            np.testing.assert_allclose(T, teleavatar.frame_pose(q, "left_ee"), atol=POSE_TOL)
+    finally:
+        listener.close()
+        stop()
