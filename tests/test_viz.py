@@ -441,3 +441,21 @@ def test_live_view_follows_a_simulated_robot_over_dds(teleavatar) -> None:
     finally:
         listener.close()
         stop()
+
+
+def test_perceived_occupancy_is_drawn_voxel_by_voxel_and_follows_the_scene(teleavatar) -> None:
+    from taplan.scene import Occupancy
+
+    scene = Scene()
+    voxels = np.array([[0, 0, 0], [1, 0, 0], [1, 2, 3]])
+    scene.put("seen", Occupancy(0.02, np.array([0.4, -0.1, -0.3]), voxels))
+    motion = viz.motions_of(teleavatar, [_motion(teleavatar)])
+    with contextlib.redirect_stdout(io.StringIO()), viz.Viewer(teleavatar, scene, motion, port=0) as v:
+        drawn = v.nodes()["/scene/seen"].batched_positions
+        np.testing.assert_allclose(drawn, np.array([0.4, -0.1, -0.3]) + (voxels + 0.5) * 0.02, atol=1e-6)
+        scene.put("seen", Occupancy(0.02, np.array([0.4, -0.1, -0.3]), voxels[:1]))  # perception's refresh
+        v.set_time(0.5)
+        assert len(v.nodes()["/scene/seen"].batched_positions) == 1
+        scene.remove("seen")
+        v.set_time(0.6)
+        assert "/scene/seen" not in v.nodes()

@@ -5,7 +5,8 @@ Scene graph (names are part of the API; tests and users find nodes by them):
 * ``/robots/<motion>/<joint>``: one frame per model joint (``universe`` for the root), posed in the world by
   forward kinematics; the robot's collision bodies (``.../<joint>/<body>``), its hand frames
   (``.../<joint>/hand_<frame>``) and attached objects hang under the joint that carries them;
-* ``/scene/<obstacle>``: the obstacles, ``/scene/occupancy``: perceived occupancy when the scene has some;
+* ``/scene/<obstacle>``: the obstacles, perceived occupancy (an ``Occupancy`` obstacle) as one box per voxel,
+  drawn again whenever the scene changes;
 * ``/paths/<motion>/<frame>``: the swept path of each hand frame over the motion;
 * ``/closest/<motion>``: a segment between the closest pair's witness points, with its clearance [mm] as a label.
 
@@ -32,7 +33,7 @@ from taplan.errors import ConfigError, InvalidInputError
 from taplan.robot import Robot
 from taplan.scene import CollisionWorld, Scene
 from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Mesh, Shape, Sphere
-from taplan.viz.geometry import capsule_mesh, cylinder_mesh, half_space_slab, segment_pose, wxyz
+from taplan.viz.geometry import box_mesh, capsule_mesh, cylinder_mesh, half_space_slab, segment_pose, wxyz
 from taplan.viz.motion import Motion
 from taplan.viz.visuals import VisualMesh, visual_meshes
 
@@ -43,6 +44,7 @@ logger = logging.getLogger(__name__)
 DEFAULT_PORT = 8080
 _OBSTACLE_COLOR = (200, 170, 120)
 _VISUAL_COLOR = (190, 190, 195)
+_OCCUPANCY_COLOR = (140, 140, 150)
 _HIGHLIGHT = (230, 40, 40)
 _PATH_COLORS = ((30, 160, 90), (150, 60, 200))
 _PATH_SAMPLES = 200  # points per swept path: 5 cm apart at most for a 10 m/s... far more than a hand moves
@@ -76,6 +78,15 @@ def _add_shape(server: Any, name: str, shape: Shape, T: np.ndarray, color: tuple
         return scene.add_box(name, color=color, dimensions=shape.size, wxyz=q, position=p, opacity=opacity)
     if isinstance(shape, Sphere):
         return scene.add_icosphere(name, radius=shape.radius, color=color, wxyz=q, position=p, opacity=opacity)
+    if shape.kind == "occupancy":  # perceived voxels: one box instance per occupied voxel
+        centers = np.asarray(shape.centers(), dtype=np.float32).reshape(-1, 3)  # type: ignore[attr-defined]
+        if not len(centers):
+            return scene.add_frame(name, show_axes=False, wxyz=q, position=p)
+        vertices, faces = box_mesh(np.full(3, shape.resolution))  # type: ignore[attr-defined]
+        rotations = np.tile(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32), (len(centers), 1))
+        return scene.add_batched_meshes_simple(
+            name, vertices, faces, rotations, centers, batched_colors=color, wxyz=q, position=p, lod="off"
+        )
     if isinstance(shape, Capsule):
         vertices, faces = capsule_mesh(shape.radius, shape.length)
     elif isinstance(shape, Cylinder):
@@ -86,7 +97,9 @@ def _add_shape(server: Any, name: str, shape: Shape, T: np.ndarray, color: tuple
     elif isinstance(shape, Mesh):
         vertices, faces = shape.vertices.astype(np.float32), shape.faces.astype(np.uint32)
     else:
-        raise InvalidInputError(name, type(shape).__name__, "a Box, Sphere, Capsule, Cylinder, HalfSpace or Mesh")
+        raise InvalidInputError(
+            name, type(shape).__name__, "a Box, Sphere, Capsule, Cylinder, HalfSpace, Mesh, Occupancy"
+        )
     return scene.add_mesh_simple(
         name, vertices, faces, color=color, wxyz=q, position=p, opacity=opacity, flat_shading=False, side="double"
     )
@@ -104,26 +117,6 @@ def _body_shape(body: Any) -> tuple[Shape, np.ndarray]:
     if length < 1e-9:
         return Sphere(float(body.radius)), pose
     return Capsule(float(body.radius), length), pose
-
-
-def occupancy_cells(scene: Scene) -> tuple[np.ndarray, float] | None:
-    """Centres (N, 3) [m] and edge [m] of a scene's perceived occupied voxels, or None when it has none.
-
-    Read from ``scene.occupancy`` (perception's voxel map) when present: an object with ``centers`` (or
-    ``occupied_centers()``) and ``voxel_size`` (or ``resolution``)."""
-    grid = getattr(scene, "occupancy", None)
-    if grid is None:
-        return None
-    centers = getattr(grid, "centers", None)
-    if centers is None and callable(getattr(grid, "occupied_centers", None)):
-        centers = grid.occupied_centers()
-    size = getattr(grid, "voxel_size", getattr(grid, "resolution", None))
-    if callable(centers):
-        centers = centers()
-    if centers is None or size is None:
-        return None
-    centers = np.asarray(centers, dtype=float).reshape(-1, 3)
-    return centers, float(size)
 
 
 class _RobotDrawing:
@@ -275,15 +268,8 @@ class Viewer:
         scene.configure_default_lights(enabled=True, cast_shadow=False)
         self._camera_defaults()
         self.obstacles: dict[str, Any] = {}
-        for obstacle in self.world.scene.obstacles.values():
-            self.obstacles[obstacle.name] = _add_shape(
-                server, f"/scene/{obstacle.name}", obstacle.shape, obstacle.pose, _OBSTACLE_COLOR
-            )
-        cells = occupancy_cells(self.world.scene)
-        if cells is not None and len(cells[0]):
-            scene.add_point_cloud(
-                "/scene/occupancy", cells[0], colors=(120, 120, 120), point_size=cells[1], point_shape="square"
-            )
+        self._scene_version = -1
+        self._sync_scene()
         meshes, self.skipped_visuals = visual_meshes(self.robot.urdf_path)
         palette = [(90, 140, 220), (235, 150, 60), (120, 190, 120)]
         self.robots: dict[str, _RobotDrawing] = {}
@@ -307,6 +293,21 @@ class Viewer:
         self._highlighted: dict[str, list[tuple[Any, tuple[int, int, int]]]] = {name: [] for name in self.robots}
         self._draw_paths()
         self._build_gui()
+
+    def _sync_scene(self) -> None:
+        """Draw the scene's obstacles again when it changed (perception replacing its occupancy, moved objects)."""
+        scene = self.world.scene
+        if scene.version == self._scene_version:
+            return
+        for handle in self.obstacles.values():
+            handle.remove()
+        self.obstacles = {}
+        for obstacle in scene.obstacles.values():
+            color = _OCCUPANCY_COLOR if obstacle.shape.kind == "occupancy" else _OBSTACLE_COLOR
+            self.obstacles[obstacle.name] = _add_shape(
+                self.server, f"/scene/{obstacle.name}", obstacle.shape, obstacle.pose, color
+            )
+        self._scene_version = scene.version
 
     def _camera_defaults(self) -> None:
         camera = self.server.initial_camera
@@ -401,6 +402,7 @@ class Viewer:
         if not (isinstance(t, (int, float)) and math.isfinite(t)):
             raise InvalidInputError("t", t, "a finite time [s]")
         with self._lock, self.server.atomic():
+            self._sync_scene()
             self.time = min(max(float(t), self.start), self.end)
             for motion in self.motions:
                 self._pose(motion.name, *motion.joints(self.time))
@@ -418,6 +420,7 @@ class Viewer:
         v = zero if v is None else np.asarray(v, dtype=float)
         a = zero if a is None else np.asarray(a, dtype=float)
         with self._lock, self.server.atomic():
+            self._sync_scene()
             self._live_state[name] = (q, v, a)
             self._pose(name, q, v, a)
 
@@ -480,7 +483,7 @@ class Viewer:
         label.text = f"{clearance * 1e3:.1f} mm"
         for member in pair:
             node = self._node_of(name, member)
-            if node is not None:
+            if node is not None and hasattr(node, "color"):
                 self._highlighted[name].append((node, tuple(node.color)))
                 node.color = _HIGHLIGHT
         if box is not None:
