@@ -2,11 +2,13 @@
 
 ``plan_motion(robot, start, goal, scene)``:
 
-1. **Validate**: start (and a joint goal) within the limits and at least ``margin`` from every obstacle and from the
-   robot itself, else :class:`~taplan.errors.CollisionError` naming the pair and the depth in mm.
+1. **Validate**: start (and a joint goal) within the limits and at least ``floor`` (2.5 mm) from every obstacle and
+   from the robot itself, else :class:`~taplan.errors.CollisionError` naming the pair and the distance in mm. An end
+   closer than ``margin`` is left or approached along a short certified segment (:mod:`~taplan.planning.ends`).
 2. **Goal IK** (pose goals ``{frame: T_root_frame}``): :func:`~taplan.ik.solve_pose` from the start, the home
-   configuration and seeded random configurations; solutions closer than ``margin`` to anything are rejected and
-   the one closest to the start (joint space) wins. None: :class:`~taplan.errors.PlanningError` naming the target.
+   configuration and seeded random configurations; solutions closer than ``floor`` are rejected, and the one
+   closest to the start (joint space) among those clear of ``margin`` wins (else among those clear of ``floor``).
+   None: :class:`~taplan.errors.PlanningError` naming the target.
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
    straight line, then from polylines through perturbed midpoints (``"optimization"``); RRT-Connect
@@ -18,6 +20,11 @@
 5. **Verification**: the timed trajectory is certified at every instant (conservative advancement with the exact
    peak joint speeds), never only at waypoints. If it comes closer than ``margin / 4``, the path is densified and
    retimed (with exact waypoints at the last attempt); a plan that fails is never returned: PlanningError.
+
+``max_time`` bounds the whole call: the goal IK stops seeding after half of it, the path search leaves
+``FINISH_SHARE`` of it (0.05–1 s) for timing and verification, a sampled path is smoothed only when the time left
+covers 2.5 times what its timing and verification took (else the certified unsmoothed plan, with a note), and every
+stage checks the deadline between its indivisible steps: the call ends within ``max_time + BUDGET_TOLERANCE``.
 """
 
 from __future__ import annotations
@@ -32,9 +39,10 @@ import numpy.typing as npt
 
 from taplan.errors import InvalidInputError, PlanningError, TimingError
 from taplan.limits import JointLimits
+from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
 from taplan.planning.optimize import optimize_path
 from taplan.planning.rrt import rrt_connect, shortcut
-from taplan.planning.verify import check_segment, verify_trajectory
+from taplan.planning.verify import MIN_CERTIFIED, check_segment, verify_trajectory
 from taplan.robot import Robot
 from taplan.scene.scene import Scene
 from taplan.scene.world import CollisionWorld
@@ -46,6 +54,10 @@ DEFAULT_MARGIN = 0.01  # [m] clearance of the path's configurations (edges keep 
 STAGES = ("straight", "optimization", "rrt-connect")
 PERTURBED_SEEDS = 2  # optimisation seeds through a random collision-free midpoint, after the straight line
 DENSIFY_STEP = 0.1  # [rad] longest path segment handed to the timing (max-norm)
+BUDGET_TOLERANCE = 0.2  # [s] documented overrun of max_time: one indivisible step (an IK solve, a QP, a timing)
+IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
+FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.3, 0.05, 1.0  # [-, s, s] the path search leaves this for timing + verify
+SMOOTH_HEADROOM, SMOOTH_MIN = 2.5, 0.05  # smoothing runs when the time left exceeds 2.5x the finish + 0.05 s
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,11 @@ class PlanReport:
         timing_attempts: Timings tried until one was verified.
         goal: The goal configuration [rad] (the IK solution for a pose goal).
         smoothed: True when the sampled path was shortened by the optimiser (stage ``"rrt-connect"``).
+        approaches: The bent ends: a start or goal closer than the margin (but clear of the floor) is left or
+            approached along a short certified segment (:class:`~taplan.planning.ends.Approach`: where, how close,
+            what is certified).
+        notes: What the planner gave up to hold the time budget (e.g. the smoothing of a sampled path).
+        elapsed: Wall time of the whole call [s].
     """
 
     success: bool
@@ -79,6 +96,9 @@ class PlanReport:
     timing_attempts: int
     goal: np.ndarray = field(repr=False)
     smoothed: bool = False
+    approaches: tuple[Approach, ...] = ()
+    notes: tuple[str, ...] = ()
+    elapsed: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -107,29 +127,27 @@ def _find_path(
     limits: JointLimits,
     margin: float,
     stages: tuple[str, ...],
-    max_time: float,
+    deadline: float,
     rng: np.random.Generator,
     times: dict[str, float],
-) -> tuple[str, list[np.ndarray], bool]:
-    """(stage, path, smoothed): the first stage in ``stages`` that finds a certified path."""
-    deadline = time.perf_counter() + max_time
-    for key in ("straight", "optimize", "sample", "smooth"):
-        times[key] = 0.0
+) -> tuple[str, list[np.ndarray]] | None:
+    """(stage, path): the first stage in ``stages`` that finds a certified path before ``deadline``
+    (``time.perf_counter()``), else None; a sampled path is shortcut but not yet smoothed."""
     for stage in stages:
         clock = time.perf_counter()
         if stage == "straight":
             found = check_segment(world, q0, q1, margin).valid
             times["straight"] += time.perf_counter() - clock
             if found:
-                return stage, [q0, q1], False
+                return stage, [q0, q1]
         elif stage == "optimization":
             for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, rng):
+                if time.perf_counter() >= deadline:
+                    break
                 result = optimize_path(world, seed_path, active, limits.lower, limits.upper, margin, deadline=deadline)
                 if result is not None:
                     times["optimize"] += time.perf_counter() - clock
-                    return stage, list(result.path), False
-                if time.perf_counter() >= deadline:
-                    break
+                    return stage, list(result.path)
             times["optimize"] += time.perf_counter() - clock
         else:
             remaining = max(deadline - time.perf_counter(), 0.0)
@@ -139,15 +157,10 @@ def _find_path(
             if found_path is None:
                 times["sample"] += time.perf_counter() - clock
                 break
-            path = shortcut(world, found_path, margin, rng=rng)
+            path = shortcut(world, found_path, margin, rng=rng, deadline=deadline)
             times["sample"] += time.perf_counter() - clock
-            clock = time.perf_counter()
-            smooth = optimize_path(world, np.array(path), active, limits.lower, limits.upper, margin, max_iterations=15)
-            times["smooth"] += time.perf_counter() - clock
-            if smooth is not None and _length(smooth.path) < _length(np.array(path)):
-                return stage, list(smooth.path), True
-            return stage, path, False
-    raise PlanningError(f"no collision-free path found within {max_time:g} s (stages: {', '.join(stages)})")
+            return stage, path
+    return None
 
 
 def _length(path: np.ndarray) -> float:
@@ -184,32 +197,42 @@ def _goal_ik(
     start: np.ndarray,
     limits: JointLimits,
     margin: float,
+    floor: float,
     seeds: int,
     rng: np.random.Generator,
+    deadline: float,
 ) -> np.ndarray:
+    """The goal IK solution closest to the start among those at least ``margin`` from everything, else among those
+    at least ``floor`` (their plans approach them along a certified segment); seeds stop at ``deadline``."""
     from taplan.ik.solve_pose import solve_pose
 
     lower, upper = limits.lower, limits.upper
     candidates = [start, robot.home] + [lower + rng.uniform(0, 1, robot.nq) * (upper - lower) for _ in range(seeds)]
-    best, best_cost = None, np.inf
+    best: dict[bool, np.ndarray] = {}  # clear of the margin (True) or only of the floor (False)
+    cost: dict[bool, float] = {True: np.inf, False: np.inf}
     reason = "no IK solution within 1 mm / 0.01 rad"
+    moving = np.isin(np.arange(robot.nq), _moving_joints(robot, targets))
     for k, seed_q in enumerate(candidates):
-        seed_q = np.where(np.isin(np.arange(robot.nq), _moving_joints(robot, targets)), seed_q, start)
+        if time.perf_counter() >= deadline:
+            reason = f"the goal IK's share of the time budget ran out after {k} seeds"
+            break
+        seed_q = np.where(moving, seed_q, start)
         result = solve_pose(robot, targets, seed_q, limits=limits, restarts=2, seed=k)
         if not result.success:
             continue
         d, pair = world.min_distance(result.q)
-        if d < margin:
-            reason = f"IK solutions collide ({pair[0]} / {pair[1]}: {d * 1e3:.1f} mm, {margin * 1e3:.1f} mm needed)"
+        if d < floor:
+            reason = f"IK solutions collide ({pair[0]} / {pair[1]}: {d * 1e3:.1f} mm, {floor * 1e3:.1f} mm needed)"
             continue
-        cost = float(np.linalg.norm(result.q - start))
-        if cost < best_cost:
-            best, best_cost = result.q, cost
-        if best is not None and k >= 2:
-            break  # the start and home seeds were tried; a collision-free solution near the start is enough
-    if best is None:
+        clear = d >= margin
+        distance = float(np.linalg.norm(result.q - start))
+        if distance < cost[clear]:
+            best[clear], cost[clear] = result.q, distance
+        if True in best and k >= 2:
+            break  # the start and home seeds were tried; a clear solution near the start is enough
+    if not best:
         raise PlanningError(f"goal {sorted(targets)}: unreachable without collision ({reason})")
-    return best
+    return best.get(True, best.get(False))
 
 
 def _moving_joints(robot: Robot, targets: Mapping[str, Any]) -> np.ndarray:
@@ -230,6 +253,112 @@ def _full_trajectory(part: Trajectory, names: tuple[str, ...], index: np.ndarray
     return Trajectory.from_polynomials(part.times, full, names)
 
 
+def _concatenate(pieces: list[Trajectory]) -> Trajectory:
+    """Rest-to-rest pieces (same joints) one after the other."""
+    if len(pieces) == 1:
+        return pieces[0]
+    order = max(p.coefficients.shape[1] for p in pieces)
+    times, coefficients, offset = [0.0], [], 0.0
+    for p in pieces:
+        c = p.coefficients
+        coefficients.append(np.concatenate([c, np.zeros((c.shape[0], order - c.shape[1], c.shape[2]))], axis=1))
+        times += list(offset + p.times[1:] - p.times[0])
+        offset = times[-1]
+    return Trajectory.from_polynomials(np.array(times), np.concatenate(coefficients), pieces[0].joint_names)
+
+
+@dataclass(frozen=True)
+class _Timed:
+    trajectory: Trajectory
+    min_clearance: float
+    pair: tuple[str, str]
+    attempts: int
+
+
+def _time_and_verify(
+    robot: Robot,
+    world: CollisionWorld,
+    path: list[np.ndarray],
+    approaches: list[Approach],
+    active: np.ndarray,
+    limits: JointLimits,
+    q0: np.ndarray,
+    q1: np.ndarray,
+    margin: float,
+    max_deviation: float,
+    deadline: float,
+    times: dict[str, float],
+) -> _Timed | str:
+    """The timed, verified trajectory of ``path`` with its approach segments, or why there is none (a sentence)."""
+    from taplan.timing.jerk_limited import jerk_limited
+    from taplan.timing.straight import straight_line
+
+    sub = limits.subset([robot.joint_names[i] for i in active])
+    names = robot.joint_names
+    lowest, lowest_pair = np.inf, ("", "")
+    ends: dict[str, Trajectory] = {}
+    for approach in approaches:  # straight rest-to-rest pieces exactly on their certified segments
+        clock = time.perf_counter()
+        a, b = (q0, approach.clear) if approach.end == "start" else (approach.clear, q1)
+        piece = _full_trajectory(straight_line(a[active], b[active], sub), names, active, q0)
+        times["timing"] += time.perf_counter() - clock
+        clock = time.perf_counter()
+        check = verify_trajectory(world, piece, floor=approach.certified - MIN_CERTIFIED, hold=q0, deadline=deadline)
+        times["verify"] += time.perf_counter() - clock
+        if not check.collision_free:
+            return "the time budget ran out" if check.timed_out else f"the {approach.end} approach did not verify"
+        ends[approach.end] = piece
+        if check.min_clearance < lowest:
+            lowest, lowest_pair = check.min_clearance, check.pair
+
+    # a straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA,
+    # denser and finally through the exact waypoints when the verification asks for more accuracy
+    plans: list[tuple[float, float] | None] = [None] if len(path) == 2 else []
+    plans += [(DENSIFY_STEP, max_deviation), (DENSIFY_STEP / 2, max_deviation / 5), (DENSIFY_STEP / 4, 0.0)]
+    why = "no timing was tried"
+    for attempt, plan in enumerate(plans):
+        if attempt and time.perf_counter() >= deadline:
+            return f"the time budget ran out after {attempt} timings ({why})"
+        clock = time.perf_counter()
+        try:
+            if plan is None:
+                part = straight_line(path[0][active], path[1][active], sub)
+            else:
+                step, deviation = plan
+                dense = _densify(path, step)[:, active]
+                if deviation > 0:
+                    part = jerk_limited(dense, sub, method="joint", max_deviation=deviation).trajectory
+                else:
+                    part = jerk_limited(dense, sub, method="path").trajectory
+        except TimingError as exc:
+            times["timing"] += time.perf_counter() - clock
+            why = f"timing the path failed: {exc}"
+            continue  # a denser path stays closer to its segments
+        middle = _full_trajectory(part, names, active, q0)
+        times["timing"] += time.perf_counter() - clock
+        clock = time.perf_counter()
+        check = verify_trajectory(world, middle, floor=margin / 4, hold=q0, deadline=deadline)
+        times["verify"] += time.perf_counter() - clock
+        if check.timed_out:
+            return f"the time budget ran out while verifying timing {attempt + 1}"
+        if check.collision_free:
+            pieces = [p for p in (ends.get("start"), middle, ends.get("goal")) if p is not None]
+            if check.min_clearance < lowest:
+                lowest, lowest_pair = check.min_clearance, check.pair
+            return _Timed(_concatenate(pieces), float(lowest), lowest_pair, attempt + 1)
+        why = (
+            f"the timed trajectory comes within {check.min_clearance * 1e3:.1f} mm of collision "
+            f"({check.pair[0]} / {check.pair[1]} at t = {check.time:.3f} s) after {attempt + 1} timings: not returned"
+        )
+    return why
+
+
+def _check_budget(max_time: Any) -> float:
+    if not (isinstance(max_time, (int, float)) and np.isfinite(max_time) and max_time > 0):
+        raise InvalidInputError("max_time", max_time, "a time budget > 0 [s]")
+    return float(max_time)
+
+
 def plan_motion(
     robot: Robot,
     start: npt.ArrayLike,
@@ -239,6 +368,7 @@ def plan_motion(
     *,
     world: CollisionWorld | None = None,
     margin: float = DEFAULT_MARGIN,
+    floor: float = DEFAULT_FLOOR,
     max_deviation: float = 0.05,
     max_time: float = 10.0,
     stages: tuple[str, ...] = STAGES,
@@ -255,9 +385,14 @@ def plan_motion(
         limits: Joint limits (default ``robot.planning_limits``).
         world: A ready :class:`~taplan.scene.CollisionWorld` (its scene is used instead of ``scene``).
         margin: Clearance [m] of the path's configurations; the timed trajectory is certified to keep a quarter.
+        floor: Hard floor [m] (``0 < floor <= margin``): a start or goal closer than ``margin`` but at least
+            ``floor`` from everything is left or approached along a short certified segment whose clearance only
+            shrinks toward it (``report.approaches``); only one inside the floor is refused.
         max_deviation: Largest corner cut of the jerk-limited timing at interior waypoints [rad] (the first timing;
             when its verification fails the retries cut a fifth of it, then follow the waypoints exactly).
-        max_time: Time budget of the path search (optimisation and sampling) [s].
+        max_time: Time budget of the whole call (goal IK, path, smoothing, timing, verification) [s]; the call
+            returns or raises within ``max_time + BUDGET_TOLERANCE`` (one indivisible step: an IK solve, a QP, a
+            timing). A sampled path whose smoothing does not fit is returned unsmoothed (``report.notes`` says so).
         stages: Path stages to try, in this order: any of ``"straight"``, ``"optimization"``, ``"rrt-connect"``.
         ik_seeds: Random seeds of the goal IK beyond the start and home.
         seed: Seed of every random choice (reproducible plans).
@@ -266,100 +401,147 @@ def plan_motion(
         The verified plan.
 
     Raises:
-        InvalidInputError: malformed start or goal (shape, NaN, outside the limits).
-        CollisionError: start or goal in collision (names the pair and the depth in mm).
-        PlanningError: unreachable goal pose, no path within ``max_time``, or no timing that verifies.
+        InvalidInputError: malformed start, goal or option (shape, NaN, outside the limits).
+        CollisionError: start or goal inside the floor (names the pair and the distance in mm).
+        PlanningError: unreachable goal pose, no path or no verified timing within ``max_time``.
     """
-    times: dict[str, float] = {}
-    clock = time.perf_counter()
+    begin = time.perf_counter()
+    times = dict.fromkeys(("validate", "goal_ik", "straight", "optimize", "sample", "smooth", "timing", "verify"), 0.0)
     limits = robot.planning_limits if limits is None else limits
     if not isinstance(limits, JointLimits) or limits.names != robot.joint_names:
         raise InvalidInputError("limits", limits, f"JointLimits over the robot's joints {robot.joint_names}")
     if not (isinstance(margin, (int, float)) and np.isfinite(margin) and margin > 0):
         raise InvalidInputError("margin", margin, "a clearance > 0 [m]")
+    if not (isinstance(floor, (int, float)) and np.isfinite(floor) and 0 < floor <= margin):
+        raise InvalidInputError("floor", floor, f"a hard floor in (0, margin = {margin:g}] [m]")
     if not (isinstance(stages, tuple) and stages and set(stages) <= set(STAGES)):
         raise InvalidInputError("stages", stages, f"a non-empty tuple of {STAGES}")
+    deadline = begin + _check_budget(max_time)
     world = world if world is not None else CollisionWorld(robot, scene)
     q0 = robot.check_configuration(start, "start")
     if not limits.within(q0):
         raise InvalidInputError("start", np.round(q0, 4).tolist(), "a configuration within the limits")
-    world.check_configuration(q0, "start", margin=margin)
+    world.check_configuration(q0, "start", margin=floor)
     rng = np.random.default_rng(seed)
-    times["validate"] = time.perf_counter() - clock
+    times["validate"] = time.perf_counter() - begin
 
     clock = time.perf_counter()
     if isinstance(goal, Mapping):
-        q1 = _goal_ik(robot, world, goal, q0, limits, margin, ik_seeds, rng)
+        ik_deadline = begin + IK_SHARE * max_time
+        q1 = _goal_ik(robot, world, goal, q0, limits, margin, floor, ik_seeds, rng, ik_deadline)
     else:
         q1 = robot.check_configuration(goal, "goal")
         if not limits.within(q1):
             raise InvalidInputError("goal", np.round(q1, 4).tolist(), "a configuration within the limits")
-        world.check_configuration(q1, "goal", margin=margin)
+        world.check_configuration(q1, "goal", margin=floor)
     times["goal_ik"] = time.perf_counter() - clock
 
     active = np.flatnonzero(np.abs(q1 - q0) > 1e-12)
     if active.size == 0:
         raise InvalidInputError("goal", "the start configuration", "a goal that differs from the start")
-    stage, path, smoothed = _find_path(world, q0, q1, active, limits, margin, stages, max_time, rng, times)
+    clock = time.perf_counter()
+    approaches: list[Approach] = []
+    for end, q_end in (("start", q0), ("goal", q1)):
+        d, pair = world.min_distance(q_end)
+        if d >= margin:
+            continue
+        approach = approach_segment(world, q_end, end, active, limits.lower, limits.upper, margin, floor)
+        if approach is None:
+            raise PlanningError(
+                f"{end}: {pair[0]} is {d * 1e3:.1f} mm from {pair[1]} (margin {margin * 1e3:.1f} mm, floor "
+                f"{floor * 1e3:.1f} mm) and no short certified segment leads away from it with moving {pair[0]}"
+            )
+        approaches.append(approach)
+    times["validate"] += time.perf_counter() - clock
+    a = next((p.clear for p in approaches if p.end == "start"), q0)
+    b = next((p.clear for p in approaches if p.end == "goal"), q1)
+    reserve = float(np.clip(FINISH_SHARE * max_time, FINISH_MIN, FINISH_MAX))
+    if np.abs(b - a).max() > 1e-12:
+        found = _find_path(world, a, b, active, limits, margin, stages, deadline - reserve, rng, times)
+        if found is None:
+            raise PlanningError(
+                f"no collision-free path found within {max_time:g} s (stages: {', '.join(stages)}; "
+                f"{reserve:.2f} s of the budget kept for timing and verification)"
+            )
+        stage, path = found
+    else:
+        stage, path = "straight", [a, b]  # both ends retreat to one clear configuration
+    clock = time.perf_counter()
+    timed = _time_and_verify(
+        robot, world, path, approaches, active, limits, q0, q1, margin, max_deviation, deadline, times
+    )
+    finish = time.perf_counter() - clock
+    if isinstance(timed, str):
+        raise PlanningError(timed)
 
-    from taplan.timing.jerk_limited import jerk_limited
-    from taplan.timing.straight import straight_line
-
-    sub = limits.subset([robot.joint_names[i] for i in active])
-    timing_time = verify_time = 0.0
-    trajectory = verification = None
-    timing_error: TimingError | None = None
-    attempts = 0
-    # a straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA,
-    # denser and finally through the exact waypoints when the verification asks for more accuracy
-    plans: list[tuple[float, float] | None] = [None] if len(path) == 2 else []
-    plans += [(DENSIFY_STEP, max_deviation), (DENSIFY_STEP / 2, max_deviation / 5), (DENSIFY_STEP / 4, 0.0)]
-    for attempt, plan in enumerate(plans):
-        attempts = attempt + 1
-        clock = time.perf_counter()
-        try:
-            if plan is None:
-                part = straight_line(path[0][active], path[1][active], sub)
-            else:
-                step, deviation = plan
-                dense = _densify(path, step)[:, active]
-                if deviation > 0:
-                    part = jerk_limited(dense, sub, method="joint", max_deviation=deviation).trajectory
+    notes: list[str] = []
+    smoothed = False
+    if stage == "rrt-connect":
+        # the certified unsmoothed plan is in hand: smoothing must leave room to time and verify its result
+        left = deadline - time.perf_counter()
+        if left < SMOOTH_HEADROOM * finish + SMOOTH_MIN:
+            notes.append(
+                f"smoothing skipped: {max(left, 0.0):.2f} s of the {max_time:g} s budget left (timing and "
+                f"verification took {finish:.2f} s); the certified unsmoothed path is returned"
+            )
+        else:
+            clock = time.perf_counter()
+            smooth = optimize_path(
+                world,
+                np.array(path),
+                active,
+                limits.lower,
+                limits.upper,
+                margin,
+                max_iterations=15,
+                deadline=deadline - SMOOTH_HEADROOM / 2 * finish,
+            )
+            times["smooth"] += time.perf_counter() - clock
+            if smooth is not None and _length(smooth.path) < _length(np.array(path)):
+                better = _time_and_verify(
+                    robot,
+                    world,
+                    list(smooth.path),
+                    approaches,
+                    active,
+                    limits,
+                    q0,
+                    q1,
+                    margin,
+                    max_deviation,
+                    deadline,
+                    times,
+                )
+                if isinstance(better, str):
+                    notes.append(
+                        f"the smoothed path was not used ({better}); the certified unsmoothed path is returned"
+                    )
                 else:
-                    part = jerk_limited(dense, sub, method="path").trajectory
-        except TimingError as exc:
-            timing_error = exc
-            timing_time += time.perf_counter() - clock
-            continue  # a denser path stays closer to its segments
-        trajectory = _full_trajectory(part, robot.joint_names, active, q0)
-        timing_time += time.perf_counter() - clock
-        clock = time.perf_counter()
-        verification = verify_trajectory(world, trajectory, floor=margin / 4, hold=q0)
-        verify_time += time.perf_counter() - clock
-        if verification.collision_free:
-            break
-    times["timing"] = timing_time
-    times["verify"] = verify_time
-    if trajectory is None or verification is None:
-        raise PlanningError(f"timing the path failed: {timing_error}") from timing_error
-    if not verification.collision_free:
-        pair = verification.pair
-        raise PlanningError(
-            f"the timed trajectory comes within {verification.min_clearance * 1e3:.1f} mm of collision "
-            f"({pair[0]} / {pair[1]} at t = {verification.time:.3f} s) after {attempts} timings: not returned"
-        )
+                    path, timed, smoothed = list(smooth.path), better, True
+            elif time.perf_counter() >= deadline - SMOOTH_HEADROOM / 2 * finish:
+                notes.append(
+                    "smoothing did not finish within the time budget; the certified unsmoothed path is returned"
+                )
     geometric = np.array(path)
     report = PlanReport(
         success=True,
         stage=stage,
         stage_times=times,
-        path_length=_length(geometric),
-        duration=trajectory.duration,
-        min_clearance=verification.min_clearance,
-        min_clearance_pair=verification.pair,
+        path_length=_length(geometric) + sum(p.length for p in approaches),
+        duration=timed.trajectory.duration,
+        min_clearance=timed.min_clearance,
+        min_clearance_pair=timed.pair,
         waypoints=len(path),
-        timing_attempts=attempts,
+        timing_attempts=timed.attempts,
         smoothed=smoothed,
         goal=q1,
+        approaches=tuple(approaches),
+        notes=tuple(notes),
+        elapsed=time.perf_counter() - begin,
     )
-    return MotionPlan(trajectory, geometric, report)
+    full_path = (
+        [q0] * ("start" in {p.end for p in approaches})
+        + list(geometric)
+        + [q1] * ("goal" in {p.end for p in approaches})
+    )
+    return MotionPlan(timed.trajectory, np.array(full_path), report)

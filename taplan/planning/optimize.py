@@ -153,9 +153,11 @@ def optimize_path(
         x_path = optimized
         configurations = np.repeat(full[None, :], len(x_path), axis=0)
         configurations[:, active] = x_path
-        checks = [
-            check_segment(world, a, b, margin) for a, b in zip(configurations[:-1], configurations[1:], strict=True)
-        ]
+        checks = []
+        for a, b in zip(configurations[:-1], configurations[1:], strict=True):
+            if time.perf_counter() >= deadline:
+                return None  # the certificate would end after the deadline
+            checks.append(check_segment(world, a, b, margin))
         if all(c.valid for c in checks):
             return OptimizedPath(configurations, iterations, min(c.clearance for c in checks))
         # a dip between the evaluated points: evaluate there too (split the segment) and optimise on

@@ -79,7 +79,7 @@ def rrt_connect(
         new, _ = steer(a, sample)
         if new >= 0:
             target = a.nodes[new]
-            while True:  # connect: extend the other tree toward the new node until blocked or joined
+            while time.perf_counter() < deadline:  # connect: extend the other tree toward the new node
                 other, reached = steer(b, target)
                 if other < 0:
                     break
@@ -98,12 +98,14 @@ def shortcut(
     margin: float,
     attempts: int = 60,
     rng: np.random.Generator | None = None,
+    deadline: float = float("inf"),
 ) -> list[np.ndarray]:
-    """Remove detours: replace sub-paths by straight segments that are certified collision-free."""
+    """Remove detours: replace sub-paths by straight segments that are certified collision-free (at most
+    ``attempts`` tries, none started after ``deadline``, a ``time.perf_counter()`` value)."""
     rng = rng or np.random.default_rng(0)
     path = list(path)
     for _ in range(attempts):
-        if len(path) <= 2:
+        if len(path) <= 2 or time.perf_counter() >= deadline:
             break
         i, j = sorted(rng.choice(len(path), size=2, replace=False))
         if j - i < 2:

@@ -13,6 +13,7 @@ interval is halved until the bound holds).
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -115,6 +116,7 @@ class Verification:
         pair: Where it occurs.
         time: When it occurs [s].
         evaluations: Distance evaluations used.
+        timed_out: True when the ``deadline`` passed before the certificate was complete (not collision-free then).
     """
 
     collision_free: bool
@@ -122,10 +124,16 @@ class Verification:
     pair: tuple[str, str]
     time: float
     evaluations: int
+    timed_out: bool = False
 
 
 def verify_trajectory(
-    world: CollisionWorld, trajectory: Trajectory, floor: float = 0.0, hold: np.ndarray | None = None
+    world: CollisionWorld,
+    trajectory: Trajectory,
+    floor: float = 0.0,
+    hold: np.ndarray | None = None,
+    *,
+    deadline: float = math.inf,
 ) -> Verification:
     """Certify ``trajectory`` keeps more than ``floor`` [m] of clearance at every instant.
 
@@ -139,6 +147,8 @@ def verify_trajectory(
         trajectory: Joints matched by name to the robot.
         floor: Clearance to certify [m].
         hold: Positions [rad] (nq,) of the robot's joints the trajectory does not drive; default ``robot.home``.
+        deadline: ``time.perf_counter()`` value after which the certificate stops (checked per ``LOOKAHEAD``
+            window): the result is then not collision-free and ``timed_out``.
     """
     names = trajectory.joint_names
     robot = world.robot
@@ -173,6 +183,8 @@ def verify_trajectory(
     if not ok:
         return Verification(False, lowest, pair, when, evaluations)
     for t_a, t_b in zip(grid[:-1], grid[1:], strict=True):
+        if time.perf_counter() > deadline:
+            return Verification(False, lowest, pair, when, evaluations, timed_out=True)
         d_b, _, ok = evaluate(float(t_b))
         if not ok:
             return Verification(False, lowest, pair, when, evaluations)

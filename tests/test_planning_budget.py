@@ -1,0 +1,162 @@
+"""plan_motion's margins that bend at the ends (starts and goals inside the margin but clear of the floor) and its
+time budget."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.errors import CollisionError, InvalidInputError, PlanningError
+from taplan.planning import motion, plan_motion
+from taplan.scene import Box, CollisionWorld, Scene
+
+ACROSS = [-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403]  # the right arm low, across the table (docs)
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _plate_below(robot: taplan.Robot, q: np.ndarray, gap: float) -> CollisionWorld:
+    """A 2 cm plate under the right hand at ``q``, moved until its closest robot body is ``gap`` [m] away."""
+    scene = Scene()
+    p = robot.frame_pose(q, "right_tcp")[:3, 3]
+    scene.add("plate", Box((0.3, 0.3, 0.02)), ([p[0], p[1], p[2] - 0.3], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    for _ in range(4):  # the plate's distance is linear in its height while the same point is closest
+        d = world.distances(q, jacobian=False)
+        mine = [k for k, pair in enumerate(d.pairs) if pair[1] == "plate"]
+        xyz = scene.obstacles["plate"].pose[:3, 3].copy()
+        xyz[2] += float(d.distance[mine].min()) - gap
+        scene.move("plate", (xyz, [0, 0, 0, 1]))
+    return world
+
+
+def _goal(robot: taplan.Robot) -> np.ndarray:
+    q = robot.home.copy()
+    q[robot.group("right").indices] = ACROSS
+    return q
+
+
+def _samples(world: CollisionWorld, trajectory: taplan.Trajectory, start: np.ndarray, count: int) -> np.ndarray:
+    """Clearance [m] at ``count`` evenly spaced times (an independent sampled check of the certificate)."""
+    index = world.robot.indices(trajectory.joint_names)
+    out = []
+    for t in np.linspace(0.0, trajectory.duration, count):
+        q = start.copy()
+        q[index] = trajectory(t)
+        out.append(world.min_distance(q)[0])
+    return np.array(out)
+
+
+def test_goal_inside_the_margin_is_approached_along_a_certified_segment(robot: taplan.Robot) -> None:
+    goal = _goal(robot)
+    world = _plate_below(robot, goal, 0.006)  # 6 mm: inside the 10 mm margin, clear of the 2.5 mm floor
+    d_goal, pair = world.min_distance(goal)
+    assert d_goal == pytest.approx(0.006, abs=1e-6) and pair[1] == "plate"
+    plan = plan_motion(robot, robot.home, goal, world=world, max_time=5.0)
+    (approach,) = plan.report.approaches
+    assert approach.end == "goal" and approach.pair == pair
+    assert approach.clearance == pytest.approx(0.006, abs=1e-9)
+    assert 0.0025 < approach.certified < 0.006
+    assert world.min_distance(approach.clear)[0] >= 0.01  # the segment starts clear of the margin
+    assert approach.travel <= 0.08  # short: no robot point moves more than 8 cm along it
+    np.testing.assert_allclose(plan.trajectory(plan.trajectory.duration), goal, atol=1e-9)
+    clearance = _samples(world, plan.trajectory, robot.home, 600)
+    assert clearance.min() >= 0.0025  # nowhere inside the floor
+    # the clearance only shrinks along the approach: the last part of the motion, from the clear configuration on
+    index = np.flatnonzero(np.linspace(0, 1, 600) * plan.trajectory.duration >= _arrival(plan, approach.clear))
+    assert np.all(np.diff(clearance[index]) <= 1e-4)
+    assert plan.report.min_clearance <= 0.006 + 1e-9
+
+
+def _arrival(plan: motion.MotionPlan, q: np.ndarray) -> float:
+    """The last time [s] the trajectory passes ``q`` (within 1e-6 rad)."""
+    ts = np.linspace(0.0, plan.trajectory.duration, 4001)
+    hits = [t for t in ts if np.abs(plan.trajectory(t) - q).max() < 1e-3]
+    assert hits, "the trajectory never reaches the approach's clear configuration"
+    return float(max(hits))
+
+
+def test_start_inside_the_margin_is_left_along_a_certified_segment(robot: taplan.Robot) -> None:
+    start = _goal(robot)
+    world = _plate_below(robot, start, 0.004)
+    plan = plan_motion(robot, start, robot.home, world=world, max_time=5.0)
+    (approach,) = plan.report.approaches
+    assert approach.end == "start" and approach.clearance == pytest.approx(0.004, abs=1e-9)
+    np.testing.assert_allclose(plan.trajectory(0.0), start, atol=1e-9)
+    assert _samples(world, plan.trajectory, start, 400).min() >= 0.0025
+
+
+def test_pose_goal_near_a_surface_is_planned_not_refused(robot: taplan.Robot) -> None:
+    goal = _goal(robot)
+    world = _plate_below(robot, goal, 0.007)
+    target = {"right_tcp": robot.frame_pose(goal, "right_tcp")}
+    plan = plan_motion(robot, robot.home, target, world=world, max_time=5.0)
+    np.testing.assert_allclose(robot.frame_pose(plan.report.goal, "right_tcp"), target["right_tcp"], atol=2e-3)
+    assert world.min_distance(plan.report.goal)[0] >= 0.0025
+    assert _samples(world, plan.trajectory, robot.home, 300).min() >= 0.0025
+
+
+def test_goal_inside_the_floor_is_refused_naming_the_pair_and_distance(robot: taplan.Robot) -> None:
+    goal = _goal(robot)
+    world = _plate_below(robot, goal, 0.0015)
+    with pytest.raises(CollisionError, match=r"goal: Link-R7_0 is 1\.5 mm from plate, inside .* 2\.5 mm") as info:
+        plan_motion(robot, robot.home, goal, world=world)
+    assert info.value.pair == ("Link-R7_0", "plate")
+    # a lower floor accepts it
+    plan = plan_motion(robot, robot.home, goal, world=world, floor=0.001, max_time=5.0)
+    assert plan.report.approaches[0].clearance == pytest.approx(0.0015, abs=1e-9)
+
+
+@pytest.mark.parametrize("floor", [0.0, -0.001, 0.02, float("nan"), "2mm"])
+def test_floor_is_validated(robot: taplan.Robot, floor: object) -> None:
+    with pytest.raises(InvalidInputError, match="floor"):
+        plan_motion(robot, robot.home, _goal(robot), floor=floor)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("max_time", [0.0, -1.0, float("inf"), None])
+def test_max_time_is_validated(robot: taplan.Robot, max_time: object) -> None:
+    with pytest.raises(InvalidInputError, match="max_time"):
+        plan_motion(robot, robot.home, _goal(robot), max_time=max_time)  # type: ignore[arg-type]
+
+
+def _hard_problem(robot: taplan.Robot) -> tuple[CollisionWorld, np.ndarray, np.ndarray]:
+    """A panel between start and goal of the right hand (the straight segment is blocked)."""
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.add("box", Box((0.12, 0.2, 0.16)), ([0.5, 0.0, -0.32], [0, 0, 0, 1]))
+    return CollisionWorld(robot, scene), robot.home.copy(), _goal(robot)
+
+
+def test_sampled_plan_whose_smoothing_does_not_fit_is_returned_unsmoothed(
+    robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    goal = _goal(robot)
+    start = robot.home
+    world = _plate_below(robot, goal, 0.05)
+    monkeypatch.setattr(motion, "SMOOTH_HEADROOM", 1e6)  # no budget can fit the smoothing now
+    plan = plan_motion(robot, start, goal, world=world, stages=("rrt-connect",), max_time=5.0, seed=1)
+    assert plan.report.stage == "rrt-connect" and not plan.report.smoothed
+    assert any("unsmoothed" in note for note in plan.report.notes)
+    assert _samples(world, plan.trajectory, start, 400).min() >= 0.01 / 4 - 1e-9
+    np.testing.assert_allclose(plan.trajectory(plan.trajectory.duration), goal, atol=1e-9)
+
+
+def test_budget_bounds_the_whole_call(robot: taplan.Robot) -> None:
+    """Returns or raises within max_time + BUDGET_TOLERANCE; the extra 0.5 s covers a loaded test machine
+    (the benchmark records the tolerance itself on every problem)."""
+    world, start, goal = _hard_problem(robot)
+    target = {"right_tcp": robot.frame_pose(goal, "right_tcp")}
+    for max_time, stages in ((0.3, ("rrt-connect",)), (0.3, motion.STAGES), (1.0, ("optimization",))):
+        begin = time.perf_counter()
+        try:
+            plan = plan_motion(robot, start, target, world=world, stages=stages, max_time=max_time)
+            assert plan.report.elapsed <= time.perf_counter() - begin
+        except PlanningError as exc:
+            assert "budget" in str(exc) or f"within {max_time:g} s" in str(exc)
+        assert time.perf_counter() - begin <= max_time + motion.BUDGET_TOLERANCE + 0.5
