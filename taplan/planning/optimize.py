@@ -34,6 +34,7 @@ SEGMENT_STEP = 0.15  # [rad] waypoint spacing (max-norm) of the optimised path
 LIMIT_INSET = 0.01  # [rad] waypoints stay this far inside the position limits (room for the timing spline)
 DENSE_SOLVERS = ("daqp", "quadprog", "proxqp")  # given dense matrices; others get scipy.sparse
 REFINEMENTS = 4  # segment splits after a failed certification
+POINTS = 0.5  # its segments are certified at margin / 2 (every planner edge): evaluated points need no more
 
 
 @dataclass(frozen=True)
@@ -157,14 +158,17 @@ def optimize_path(
         for a, b in zip(configurations[:-1], configurations[1:], strict=True):
             if time.perf_counter() >= deadline:
                 return None  # the certificate would end after the deadline
-            checks.append(check_segment(world, a, b, margin))
+            checks.append(check_segment(world, a, b, margin, points=POINTS * margin))
         if all(c.valid for c in checks):
             return OptimizedPath(configurations, iterations, min(c.clearance for c in checks))
         # a dip between the evaluated points: evaluate there too (split the segment) and optimise on
+        # the failed segment in quarters and its neighbours in halves: a dip bends the path around it
+        failed = [not c.valid for c in checks]
         refined = [x_path[0]]
-        for k, c in enumerate(checks):
-            if not c.valid:
-                refined.append((x_path[k] + x_path[k + 1]) / 2)
+        for k in range(len(checks)):
+            near = any(failed[max(k - 1, 0) : k + 2])
+            pieces = 4 if failed[k] else 2 if near else 1
+            refined += [x_path[k] + (x_path[k + 1] - x_path[k]) * i / pieces for i in range(1, pieces)]
             refined.append(x_path[k + 1])
         x_path = np.array(refined)
         if iterations >= max_iterations or time.perf_counter() >= deadline:

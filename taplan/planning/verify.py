@@ -43,9 +43,11 @@ class SegmentCheck:
     evaluations: int
 
 
-def check_segment(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margin: float) -> SegmentCheck:
-    """Certify that the straight joint-space segment keeps at least ``margin / 2`` [m] everywhere and ``margin`` at
-    the evaluated points; invalid as soon as an evaluated configuration is closer than ``margin``.
+def check_segment(
+    world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margin: float, *, points: float | None = None
+) -> SegmentCheck:
+    """Certify that the straight joint-space segment keeps at least ``margin / 2`` [m] everywhere and ``points``
+    (default ``margin``) at the evaluated configurations; invalid as soon as one is closer than ``points``.
 
     Per pair, the distance changes by at most ``travel_p · |Δq|`` over the segment, so on ``[s_a, s_b]`` it stays
     above ``(d_a + d_b − rate_p (s_b − s_a)) / 2`` with ``rate_p = travel_p · |q_b − q_a|``: intervals are halved
@@ -55,6 +57,7 @@ def check_segment(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margi
     lowest, lowest_pair = math.inf, ("", "")
     evaluations = 0
     floor = margin / 2
+    required = margin if points is None else max(float(points), floor + MIN_CERTIFIED)
 
     def evaluate(s: float) -> tuple[np.ndarray, np.ndarray, bool]:
         nonlocal lowest, lowest_pair, evaluations
@@ -64,7 +67,7 @@ def check_segment(world: CollisionWorld, q_a: np.ndarray, q_b: np.ndarray, margi
         if d < lowest:
             lowest, lowest_pair = d, pair
         assert distances.travel is not None
-        return distances.distance, distances.travel @ step, d >= margin
+        return distances.distance, distances.travel @ step, d >= required
 
     d_a, rate, ok = evaluate(0.0)
     if not ok:

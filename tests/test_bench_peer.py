@@ -1,0 +1,109 @@
+"""The fair OMPL peer of benchmarks/bench_planning.py: its compiled validity check sees the same bodies and pairs
+as taplan's CollisionWorld, and its motion-check resolution cannot step through the thinnest obstacle."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from benchmarks._peer import THINNEST, CompiledScene, dense_check, motion_resolution
+from benchmarks._scenes import make_scene
+from benchmarks.bench_planning import ompl_setup
+from taplan.scene import Box, CollisionWorld, Cylinder, HalfSpace, Scene, Sphere
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _random(robot: taplan.Robot, rng: np.random.Generator) -> np.ndarray:
+    limits = robot.planning_limits
+    return limits.lower + rng.uniform(0, 1, robot.nq) * (limits.upper - limits.lower)
+
+
+def test_compiled_distances_equal_the_worlds(robot: taplan.Robot) -> None:
+    scene = Scene()
+    scene.add("floor", HalfSpace(), ([0, 0, -0.9], [0, 0, 0, 1]))
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.add("ball", Sphere(0.08), ([0.45, 0.3, -0.1], [0, 0, 0, 1]))
+    scene.add("pole", Cylinder(0.01, 1.0), ([0.4, -0.3, -0.3], [0, 0, 0, 1]))
+    scene.attach("cup", Cylinder(0.035, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    compiled = CompiledScene(world)
+    assert set(compiled.pairs) == set(world.distances(robot.home, jacobian=False).pairs)
+    rng = np.random.default_rng(4)
+    colliding = 0
+    for _ in range(60):
+        q = _random(robot, rng)
+        d = world.min_distance(q)[0]
+        assert compiled.min_distance(q) == pytest.approx(d, abs=1e-6)  # [m]: GJK on cylinders iterates to ~1e-7
+        if abs(d) > 1e-6:
+            assert compiled.valid(q) == (d > 0)
+        colliding += d < 0
+    assert 0 < colliding < 60  # both outcomes were exercised
+
+
+def test_motion_resolution_moves_no_point_more_than_half_the_thinnest_obstacle(robot: taplan.Robot) -> None:
+    world = CollisionWorld(robot, make_scene("window", np.random.default_rng(0)))
+    active = robot.group("right").indices
+    extent = 12.0  # [rad] any space extent: the resolution is a fraction of it
+    step = motion_resolution(world, active, extent) * extent
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        q = _random(robot, rng)
+        direction = np.zeros(robot.nq)
+        direction[active] = rng.normal(size=active.size)
+        q_next = q + direction / np.linalg.norm(direction) * step
+        assert world.max_point_speed_bound(q, q_next) <= THINNEST / 2 + 1e-12
+
+
+def test_ompl_motion_check_does_not_step_through_a_thin_obstacle(robot: taplan.Robot) -> None:
+    pytest.importorskip("ompl")
+    active = robot.group("right").indices
+    q_mid = robot.home.copy()
+    # a 2 cm ball in the middle of the right forearm at home; the motion sweeps the forearm across it
+    world = CollisionWorld(robot, Scene())
+    forearm = next(b for b in world.bodies if b.name == "Link-R4_0")
+    robot_data = robot.model.createData()
+    import pinocchio as pin
+
+    pin.forwardKinematics(robot.model, robot_data, q_mid)
+    placement = robot_data.oMi[forearm.joint]
+    center = placement.act((np.asarray(forearm.start) + np.asarray(forearm.end)) / 2)
+    scene = Scene()
+    scene.add("ball", Sphere(THINNEST / 2), (center, [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    compiled = CompiledScene(world)
+    assert not compiled.valid(q_mid)
+    q_a, q_b = q_mid.copy(), q_mid.copy()
+    q_a[active[1]] -= 0.3  # the shoulder's second joint swings the forearm 10+ cm clear on both sides
+    q_b[active[1]] += 0.3
+    assert compiled.valid(q_a) and compiled.valid(q_b)
+
+    setup = ompl_setup(world, compiled, robot, q_mid, active)
+    setup.setup()
+    si, space = setup.getSpaceInformation(), setup.getStateSpace()
+    a, b = space.allocState(), space.allocState()
+    for k, j in enumerate(active):
+        a[k], b[k] = float(q_a[j]), float(q_b[j])
+    assert not si.checkMotion(a, b)
+
+
+def test_dense_check_counts_the_collisions_of_a_motion_through_an_obstacle(robot: taplan.Robot) -> None:
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    compiled = CompiledScene(world)
+    goal = robot.home.copy()
+    goal[robot.group("right").indices] = [-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403]
+    index = np.arange(robot.nq)
+
+    def through(t: float) -> np.ndarray:  # home -> 30 cm below the table's top along the straight segment
+        return robot.home + (goal - robot.home) * t
+
+    collisions, lowest = dense_check(compiled, world, through, 1.0, robot.home, index)
+    samples = [world.min_distance(through(t))[0] for t in np.linspace(0, 1, 200)]
+    assert lowest == pytest.approx(min(lowest, min(samples)), abs=1e-3)
+    assert (collisions > 0) == (min(samples) < 0)
