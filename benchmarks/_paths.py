@@ -47,3 +47,24 @@ def near_bound_walk(limits: taplan.JointLimits, count: int, seed: int, step: flo
     if np.max(np.abs(q[-1] - q[0])) == 0.0 and all(np.array_equal(p, q[0]) for p in q):
         q[-1] = np.clip(q[0] + step, lo, hi) if np.any(q[0] + step <= hi) else np.clip(q[0] - step, lo, hi)
     return np.array(q)
+
+
+def teleoperation_recording(
+    limits: taplan.JointLimits, rate: float, duration: float, seed: int, noise: float = 5e-4
+) -> tuple[np.ndarray, np.ndarray]:
+    """A synthetic teleoperation recording: ``(times [s], positions [rad] (k, n))`` sampled at about ``rate`` [Hz]
+    with 5 % timing jitter. Each joint is a sum of three slow sines (0.03-0.25 Hz, 10-40 % of its half range)
+    clipped onto the position bounds (an operator pressing against a limit), plus white noise of ``noise`` [rad]
+    (which may put samples slightly outside the bounds, as an encoder's reading can)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration, 1.0 / rate)
+    t = np.sort(t + rng.normal(0.0, 0.05 / rate, t.shape))
+    t -= t[0]
+    mid, half = (limits.lower + limits.upper) / 2, (limits.upper - limits.lower) / 2
+    q = np.zeros((len(t), limits.size))
+    for j in range(limits.size):
+        for _ in range(3):
+            amplitude = rng.uniform(0.1, 0.4) * half[j]
+            q[:, j] += amplitude * np.sin(2 * np.pi * rng.uniform(0.03, 0.25) * t + rng.uniform(0.0, 2 * np.pi))
+    q = np.clip(mid + q, limits.lower, limits.upper)
+    return t, q + rng.normal(0.0, noise, q.shape)

@@ -7,6 +7,11 @@ limits (TOPP-RA); ``jerk`` (default) also limits jerk and starts and ends with z
 scene.yaml`` plans collision-free legs between consecutive waypoints around the scene's obstacles
 (:func:`taplan.planning.plan_motion`: certified path, jerk-limited timing, verified; joints missing from FILE hold the
 home pose), stopping at each waypoint; a leg that cannot be planned is an error naming it.
+
+``--recorded`` (implied for a ``.mcap`` bag) reads FILE as a recorded demonstration: a CSV whose first column is
+the time [s], or a rosbag2 bag's joint_states. It is made limit-respecting and jerk-limited within
+``--max-deviation`` of the recording (:func:`taplan.timing.time_demonstration`), keeping its timing where the
+limits allow (``--fastest``: as fast as they allow), and the deviation and slow-downs are reported.
 """
 
 from __future__ import annotations
@@ -34,6 +39,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=100.0, help="also write a CSV sampled at this rate [Hz]")
     parser.add_argument("--scene", default=None, help="plan collision-free legs around this scene (.yaml/.json)")
     parser.add_argument("--margin", type=float, default=0.01, help="clearance of the planned path [m] (0.01)")
+    parser.add_argument(
+        "--recorded", action="store_true", help="FILE is a recorded demonstration (time column; implied for .mcap)"
+    )
+    parser.add_argument(
+        "--max-deviation", type=float, default=0.01, help="recorded: largest deviation from the recording [rad] (0.01)"
+    )
+    parser.add_argument("--fastest", action="store_true", help="recorded: as fast as the limits allow, not as recorded")
+    parser.add_argument(
+        "--stream", choices=("measured", "commanded"), default="measured", help="recorded bag: which joint stream"
+    )
 
 
 def load_waypoints(path: Path, joint_names: tuple[str, ...] | None = None) -> tuple[list[str], np.ndarray]:
@@ -51,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError("--margin", args.margin, "a clearance >= 0 [m]")
     default = f"{path.stem}_planned.json" if args.scene is not None else f"{path.stem}_timed.json"
     output = output_path(Path(args.output) if args.output else path.with_name(default), "--output", suffixes=SUFFIXES)
+    if args.recorded or path.suffix.lower() == ".mcap":
+        return _plan_recording(args, path, output)
     robot = Robot.teleavatar()
     names, waypoints = load_waypoints(path, robot.joint_names)
     if args.scene is not None:
@@ -66,6 +83,26 @@ def run(args: argparse.Namespace) -> int:
     report = check(trajectory, limits, thresholds=thresholds, name=f"{path.name} ({args.method}, {args.limits} limits)")
     print(report.table())
     print(f"\n{len(waypoints)} waypoints, {len(names)} joints -> {trajectory.duration:.3f} s")
+    print(f"wrote {output} (exact) and {sampled} ({args.rate:g} Hz samples)")
+    return 0 if report.passed else 1
+
+
+def _plan_recording(args: argparse.Namespace, path: Path, output: Path) -> int:
+    from taplan.timing import load_recording, time_demonstration
+
+    times, positions, names = load_recording(str(path), args.stream)
+    robot = Robot.teleavatar()
+    limits = (robot.planning_limits if args.limits == "planning" else robot.limits).subset(names)
+    result = time_demonstration(
+        times, positions, limits, max_deviation=args.max_deviation, keep_timing=not args.fastest, robot=robot
+    )
+    trajectory = result.trajectory
+    trajectory.save(output)
+    sampled = trajectory.resample(args.rate).save(output.with_name(f"{output.stem}_{args.rate:g}hz.csv"))
+    report = check(trajectory, limits, thresholds=Thresholds(check_jerk=True), name=f"{path.name} (recorded)")
+    print(report.table())
+    print(f"\n{len(times)} recorded samples, {len(names)} joints")
+    print(result.summary())
     print(f"wrote {output} (exact) and {sampled} ({args.rate:g} Hz samples)")
     return 0 if report.passed else 1
 

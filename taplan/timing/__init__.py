@@ -8,13 +8,15 @@ timing), :mod:`~taplan.timing.sync` (dual-arm time base), :mod:`~taplan.timing.l
 the limits), :mod:`~taplan.planning.cartesian` (straight lines through IK: a
 planner one layer up, still importable from here),
 :mod:`~taplan.timing.straight` (time-optimal jerk-limited straight joint-space segment, ruckig),
-:mod:`~taplan.timing.optimize` (casadi/ipopt minimum-time or minimum-jerk trajectories).
+:mod:`~taplan.timing.optimize` (casadi/ipopt minimum-time or minimum-jerk trajectories),
+:mod:`~taplan.timing.demonstration` (recorded demonstrations into jerk-limited trajectories).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from taplan.timing.demonstration import DemonstrationResult, Slowdown, load_recording, time_demonstration
 from taplan.timing.jerk_limited import JerkLimitedResult, filter_profile, jerk_limited
 from taplan.timing.limits_check import LimitUsage, limit_usage, sampled_limit_usage
 from taplan.timing.optimize import OptimizationResult, optimize
@@ -28,6 +30,7 @@ __all__ = [
     "cartesian_line",
     "cartesian_offset",
     "line_deviation",
+    "DemonstrationResult",
     "JerkLimitedResult",
     "LimitUsage",
     "OptimizationResult",
@@ -37,12 +40,15 @@ __all__ = [
     "grid_for",
     "jerk_limited",
     "limit_usage",
+    "load_recording",
     "optimize",
     "retime",
     "sampled_limit_usage",
     "split",
     "straight_line",
+    "Slowdown",
     "synchronise",
+    "time_demonstration",
     "time_optimal_profile",
 ]
 

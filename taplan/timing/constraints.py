@@ -22,7 +22,7 @@ import numpy as np
 from toppra.constraint import DiscretizationType
 from toppra.constraint.linear_constraint import LinearConstraint
 
-__all__ = ["SegmentLimitConstraint"]
+__all__ = ["SegmentLimitConstraint", "PathJerkSpeedConstraint", "PathSpeedCap"]
 
 _TINY_TANGENT = 1e-12  # [rad] per unit s: |q'| below this does not bound the path speed
 
@@ -116,4 +116,23 @@ class PathJerkSpeedConstraint(LinearConstraint):
         third = np.maximum(np.maximum(left, right), _TINY_TANGENT)
         x_max = np.min((self.fraction * self.jerk / third) ** (2.0 / 3.0), axis=1)
         xbound = np.column_stack([np.zeros_like(x_max), x_max])
+        return None, None, None, None, None, None, xbound
+
+
+class PathSpeedCap(LinearConstraint):
+    """``ṡ <= max_speed`` everywhere: with the path parameter in seconds of a recording, ``max_speed = 1`` never runs
+    ahead of the recording (TOPP-RA then keeps its timing wherever the limits allow it, and slows down elsewhere).
+
+    ``x = ṡ²`` is linear in ``s`` on each grid segment, so the bound at the gridpoints holds in between.
+    """
+
+    def __init__(self, max_speed: float) -> None:
+        super().__init__()
+        self.max_speed = float(max_speed)
+        self.dof = 1
+        self.discretization_type = DiscretizationType.Collocation
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):  # noqa: ANN001, ANN201 (toppra API)
+        count = np.asarray(gridpoints).shape[0]
+        xbound = np.column_stack([np.zeros(count), np.full(count, self.max_speed**2)])
         return None, None, None, None, None, None, xbound

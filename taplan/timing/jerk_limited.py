@@ -101,6 +101,24 @@ class JerkLimitedResult:
     time_scale: float
     method: str = "path"
     deviation: float = 0.0
+    profile: PathProfile | None = None
+
+    def path_position(self, t: npt.ArrayLike) -> np.ndarray:
+        """``"path"`` method: the path parameter ``s`` the trajectory is at, at times ``t`` [s] (non-decreasing
+        in ``t``; the trajectory is ``path(path_position(t))``).
+
+        Raises:
+            InvalidInputError: the result of the ``"joint"`` method (it leaves the path near corners).
+        """
+        if self.profile is None:
+            raise InvalidInputError("method", self.method, "'path' (only its trajectory stays on the path)")
+        tau = np.asarray(t, dtype=float) / self.time_scale
+        integral, _, _, _ = _Timing(self.profile).eval(np.atleast_1d(tau))
+        before, _, _, _ = _Timing(self.profile).eval(np.atleast_1d(tau - self.width))
+        s0 = self.profile.gridpoints[0]
+        value = s0 + (integral - before - s0 * self.width) / self.width  # s is held at s0 before t = 0
+        value = np.minimum(value, self.profile.gridpoints[-1])
+        return value.reshape(np.shape(tau))
 
     @property
     def duration_ratio(self) -> float:
@@ -211,6 +229,7 @@ def jerk_limited(
     repairs: int = DEFAULT_REPAIRS,
     points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT,
     check_positions: bool = True,
+    max_path_speed: float | None = None,
 ) -> JerkLimitedResult:
     """Jerk-limited rest-to-rest trajectory along the path through the waypoints.
 
@@ -240,6 +259,8 @@ def jerk_limited(
         repairs: ``"path"`` only: local tighten-and-re-solve rounds.
         points_per_segment: TOPP-RA grid segments per waypoint interval.
         check_positions: Raise when the path leaves the position limits.
+        max_path_speed: Upper bound on the path speed ``ṡ``, or None (see
+            :func:`~taplan.timing.toppra_retime.time_optimal_profile`); the moving average keeps it.
 
     Returns:
         The trajectory, with its duration ratio to TOPP-RA and its largest waypoint deviation.
@@ -265,15 +286,17 @@ def jerk_limited(
     if check_positions:
         check_path_positions(path, limits)
     if method == "joint" and max_deviation > 0:
-        result = _joint_filter(path, limits, float(max_deviation), int(points_per_segment))
+        result = _joint_filter(path, limits, float(max_deviation), int(points_per_segment), max_path_speed)
         if result is not None:
             return result
         logger.debug("jerk_limited: corners still cut by more than %.4g rad; filtering the path timing", max_deviation)
-    return _path_filter(path, limits, width_factors, jerk_fraction, int(repairs), int(points_per_segment))
+    return _path_filter(
+        path, limits, width_factors, jerk_fraction, int(repairs), int(points_per_segment), max_path_speed
+    )
 
 
 def _joint_filter(
-    path: Path, limits: JointLimits, max_deviation: float, points_per_segment: int
+    path: Path, limits: JointLimits, max_deviation: float, points_per_segment: int, max_path_speed: float | None
 ) -> JerkLimitedResult | None:
     """The joint-space moving average of TOPP-RA, or None when a corner stays cut by more than ``max_deviation``."""
     vel = np.asarray(limits.velocity, dtype=float)
@@ -284,7 +307,9 @@ def _joint_filter(
     scale = np.ones(len(grid_for(path, points_per_segment)))
     topp_duration = 0.0
     for attempt in range(DEVIATION_REPAIRS + 1):
-        profile = time_optimal_profile(path, vel, acc, points_per_segment=points_per_segment, limit_scale=scale)
+        profile = time_optimal_profile(
+            path, vel, acc, points_per_segment=points_per_segment, limit_scale=scale, max_path_speed=max_path_speed
+        )
         if attempt == 0:
             topp_duration = profile.duration
         topp = profile.to_trajectory(limits.names)
@@ -330,13 +355,16 @@ def _path_filter(
     jerk_fraction: float,
     repairs: int,
     points_per_segment: int,
+    max_path_speed: float | None = None,
 ) -> JerkLimitedResult:
     """The moving average of the path timing s(t), with local repair rounds (passes every waypoint exactly)."""
     vel = np.asarray(limits.velocity, dtype=float)
     acc = np.asarray(limits.acceleration, dtype=float)
     jerk = np.asarray(limits.jerk, dtype=float)
     base = float(np.max(acc / jerk))
-    topp_duration = time_optimal_profile(path, vel, acc, points_per_segment=points_per_segment).duration
+    topp_duration = time_optimal_profile(
+        path, vel, acc, points_per_segment=points_per_segment, max_path_speed=max_path_speed
+    ).duration
     scale = np.ones(len(grid_for(path, points_per_segment)))
     best: JerkLimitedResult | None = None
     for _ in range(repairs + 1):
@@ -348,6 +376,7 @@ def _path_filter(
             jerk=jerk,
             jerk_fraction=jerk_fraction,
             limit_scale=scale,
+            max_path_speed=max_path_speed,
         )
         round_best = None
         for factor in width_factors:
@@ -362,7 +391,10 @@ def _path_filter(
         assert round_best is not None
         duration, traj, w, c, segment_ratio = round_best
         if best is None or duration < best.trajectory.duration:
-            best = JerkLimitedResult(time_scaled(traj, c) if c > 1.0 else traj, topp_duration, w, c, "path", 0.0)
+            c_used = c if c > 1.0 else 1.0
+            best = JerkLimitedResult(
+                time_scaled(traj, c) if c > 1.0 else traj, topp_duration, w, c_used, "path", 0.0, profile
+            )
         if c <= 1.0:
             break
         scale = _tighten(scale, profile.times, traj.times, w, segment_ratio)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.interpolate import CubicSpline, PPoly
+from scipy.interpolate import CubicHermiteSpline, CubicSpline, PPoly
 from toppra.interpolator import AbstractGeometricPath
 
 from taplan._validation import as_matrix, as_vector
@@ -35,13 +35,16 @@ DUPLICATE_TOL = 1e-9  # [rad]: consecutive waypoints closer than this (max-norm)
 _PARAMETRISATIONS = ("uniform", "chord")
 
 
-def validate_waypoints(waypoints: npt.ArrayLike, name: str = "waypoints", size: int | None = None) -> np.ndarray:
+def validate_waypoints(
+    waypoints: npt.ArrayLike, name: str = "waypoints", size: int | None = None, *, repeats: bool = False
+) -> np.ndarray:
     """Return ``waypoints`` as a finite (N, n) array with N >= 2 and no duplicate consecutive rows, or raise.
 
     Args:
         waypoints: Joint positions [rad], shape (N, n).
         name: Argument name used in error messages.
         size: Required n, or None.
+        repeats: Allow consecutive equal rows (a pause on a path parametrised by time).
     """
     q = as_matrix(waypoints, name, (None, size))
     if q.shape[0] < 2:
@@ -49,7 +52,7 @@ def validate_waypoints(waypoints: npt.ArrayLike, name: str = "waypoints", size: 
     if q.shape[1] < 1:
         raise InvalidInputError(name, f"shape {q.shape}", "at least one joint")
     step = np.max(np.abs(np.diff(q, axis=0)), axis=1)
-    if np.any(step <= DUPLICATE_TOL):
+    if not repeats and np.any(step <= DUPLICATE_TOL):
         k = int(np.argmax(step <= DUPLICATE_TOL))
         raise InvalidInputError(
             name, f"waypoints {k} and {k + 1} are equal", f"consecutive waypoints that differ by > {DUPLICATE_TOL} rad"
@@ -84,13 +87,16 @@ class Path(AbstractGeometricPath):
 
     Args:
         waypoints: Joint positions [rad], shape (N, n), N >= 2, no two consecutive equal.
-        ss: Path parameter at the waypoints, strictly increasing, shape (N,); overrides ``parametrisation``.
+        ss: Path parameter at the waypoints, strictly increasing, shape (N,); overrides ``parametrisation``. With
+            ``ss``, consecutive equal waypoints are allowed (a pause when ``s`` is time).
         parametrisation: ``"uniform"`` (s in [0, 1], equal steps, toppra's usual choice) or ``"chord"`` (s = cumulative
             joint-space distance [rad], so ``|q'(s)|`` is about 1).
         start_tangent: ``q'(s_0)`` [rad]/[unit s], shape (n,), or None (not-a-knot end condition).
         end_tangent: ``q'(s_N)``, shape (n,), or None.
         bounds: ``(lower, upper)`` [rad], each shape (n,), or None: the path never leaves this box (see the module
             notes). Every waypoint must be inside it.
+        derivatives: ``(q'(ss), q''(ss))``, each shape (N, n), of a C² cubic spline through the waypoints (e.g. a
+            least-squares fit), used instead of interpolating; requires ``ss``.
 
     Raises:
         InvalidInputError: malformed waypoints, ``ss`` or tangents, or a waypoint outside ``bounds``.
@@ -105,8 +111,9 @@ class Path(AbstractGeometricPath):
         start_tangent: npt.ArrayLike | None = None,
         end_tangent: npt.ArrayLike | None = None,
         bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+        derivatives: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
     ) -> None:
-        q = validate_waypoints(waypoints)
+        q = validate_waypoints(waypoints, repeats=ss is not None)
         n_points, dof = q.shape
         if ss is None:
             if parametrisation not in _PARAMETRISATIONS:
@@ -128,11 +135,20 @@ class Path(AbstractGeometricPath):
                 (2, np.zeros(dof)) if start is None else (1, start),
                 (2, np.zeros(dof)) if end is None else (1, end),
             )
-        spline: PPoly = CubicSpline(s, q, bc_type=bc)
+        if derivatives is not None:
+            if ss is None or not isinstance(derivatives, tuple | list) or len(derivatives) != 2:
+                raise InvalidInputError("derivatives", type(derivatives).__name__, "(slopes, curvatures) with ss")
+            given = (
+                as_matrix(derivatives[0], "derivatives[0]", q.shape),
+                as_matrix(derivatives[1], "derivatives[1]", q.shape),
+            )
+            spline: PPoly = CubicHermiteSpline(s, q, given[0])
+        else:
+            spline = CubicSpline(s, q, bc_type=bc)
         self.bounded = False
-        if bounds is not None:
-            lower, upper = _box(bounds, q)
-            slope, curvature = spline(s, 1), spline(s, 2)
+        if bounds is not None or derivatives is not None:
+            lower, upper = _box(bounds, q) if bounds is not None else (np.full(dof, -np.inf), np.full(dof, np.inf))
+            slope, curvature = (spline(s, 1), spline(s, 2)) if derivatives is None else given
             d, e = _inside_box_derivatives(s, q, slope, curvature, lower, upper)
             if not (np.array_equal(d, slope) and np.array_equal(e, curvature)):
                 spline = PPoly(_quintic_hermite(s, q, d, e), s)

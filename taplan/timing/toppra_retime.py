@@ -38,7 +38,7 @@ from taplan._validation import as_vector
 from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.timing._polynomial import compose_quadratic, max_abs_derivative, time_scaled
-from taplan.timing.constraints import PathJerkSpeedConstraint, SegmentLimitConstraint
+from taplan.timing.constraints import PathJerkSpeedConstraint, PathSpeedCap, SegmentLimitConstraint
 from taplan.timing.path import Path, drop_duplicates
 from taplan.trajectory import Trajectory
 
@@ -177,6 +177,7 @@ def time_optimal_profile(
     jerk: np.ndarray | None = None,
     jerk_fraction: float = 0.5,
     limit_scale: np.ndarray | None = None,
+    max_path_speed: float | None = None,
 ) -> PathProfile:
     """Solve TOPP-RA with toppra on taplan's grid and integrate the result exactly.
 
@@ -192,6 +193,8 @@ def time_optimal_profile(
         jerk_fraction: See ``jerk``.
         limit_scale: Per-gridpoint factor in (0, 1] on the velocity and acceleration limits, shape (M+1,) for the
             grid :func:`grid_for` returns, or None.
+        max_path_speed: Upper bound on the path speed ``ṡ`` [unit s / s], or None (e.g. 1 for a path parametrised
+            by a recording's time: never faster than the recording).
 
     Raises:
         TimingError: toppra found no parameterisation; the message says why.
@@ -200,6 +203,8 @@ def time_optimal_profile(
     constraints = [SegmentLimitConstraint(velocity, acceleration, scale=limit_scale)]
     if jerk is not None:
         constraints.append(PathJerkSpeedConstraint(jerk, jerk_fraction))
+    if max_path_speed is not None:
+        constraints.append(PathSpeedCap(max_path_speed))
     level = _toppra_logger.level
     _toppra_logger.setLevel(logging.ERROR)
     try:
