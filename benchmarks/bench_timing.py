@@ -5,7 +5,12 @@ compute time, trajectory duration, and the largest sampled (1 kHz) |q̇|/limit, 
 failures. toppra's defaults: ``TOPPRA([JointVelocityConstraint, JointAccelerationConstraint], path)`` with its own
 gridpoint proposal and ``ParametrizeSpline`` output, on the same ``taplan.timing.Path``.
 
-Run: ``python -m benchmarks.bench_timing [--quick] [--repeats N]``.
+Also (issue 21): the near-bound sweep (``--sweep N`` paths of 2-5,000 waypoints drawn up to and onto the position
+bounds, with duplicates, tiny steps and reversals: refusals and exact violations of every limit, position
+included), and recorded demonstrations (synthetic teleoperation recordings with noise at 30 and 100 Hz through
+``taplan.timing.time_demonstration``: compute, deviation, duration against the recording).
+
+Run: ``python -m benchmarks.bench_timing [--quick] [--repeats N] [--sweep N]``.
 """
 
 from __future__ import annotations
@@ -22,8 +27,8 @@ import toppra.constraint
 
 import taplan
 from benchmarks import _harness
-from benchmarks._paths import random_walk
-from taplan.timing import Path, jerk_limited, limit_usage, retime
+from benchmarks._paths import near_bound_walk, random_walk, teleoperation_recording
+from taplan.timing import Path, jerk_limited, limit_usage, retime, time_demonstration
 
 SIZES = (10, 50, 200)
 RATE = 1000.0  # [Hz] sampling for the limit checks
@@ -129,6 +134,141 @@ def run(sizes: tuple[int, ...], seeds: int, repeats: int, jerk: bool, large: tup
         "limits": "TeleAvatar left arm, planning limits (0.3 x ceilings)",
         "large": list(large),
     }
+
+
+SWEEP_SIZES = (2, 3, 4, 5, 6, 8, 10, 15, 20, 30)  # most paths: short ones, where the hard cases are dense
+SWEEP_LARGE = (200, 1000, 5000)  # and one each of these
+PATH_METHOD_EVERY = 20  # the path filter (seconds per path) on every 20th path of <= 10 waypoints
+
+
+def sweep(count: int) -> dict[str, Any]:
+    """Near-bound sweep: refusals and exact limit violations of retime and jerk_limited (both methods)."""
+    logging.getLogger("toppra").setLevel(logging.ERROR)
+    robot = taplan.Robot.teleavatar()
+    limits = robot.planning_limits.subset(robot.group("right").joint_names)
+    sizes = [SWEEP_SIZES[k % len(SWEEP_SIZES)] for k in range(max(0, count - len(SWEEP_LARGE)))]
+    sizes += list(SWEEP_LARGE[: min(count, len(SWEEP_LARGE))])
+    tally: dict[str, dict[str, Any]] = {}
+    for k, size in enumerate(sizes):
+        q = near_bound_walk(limits, size, 7_000_003 + k)
+        methods = [("retime", lambda q=q: retime(q, limits)), ("jerk_limited", lambda q=q: jerk_limited(q, limits))]
+        if size <= 10 and k % PATH_METHOD_EVERY == 0:
+            methods.append(("jerk_limited_path", lambda q=q: jerk_limited(q, limits, method="path")))
+        for name, call in methods:
+            entry = tally.setdefault(name, {"paths": 0, "refusals": 0, "violations": 0, "worst": 0.0, "errors": []})
+            entry["paths"] += 1
+            try:
+                out = call()
+            except taplan.TaplanError as exc:
+                entry["refusals"] += 1
+                entry["errors"].append(f"{size} waypoints, path {k}: {exc}")
+                continue
+            traj = out if isinstance(out, taplan.Trajectory) else out.trajectory
+            usage = limit_usage(traj, limits)
+            worst = max(usage.max_velocity, usage.max_acceleration, usage.max_jerk if name != "retime" else 0.0)
+            entry["worst"] = max(entry["worst"], worst)
+            if worst > 1 + 1e-6 or usage.position.max() > 1e-9:
+                entry["violations"] += 1
+    return {"paths": len(sizes), "sizes": sorted(set(sizes)), "methods": tally}
+
+
+def demonstrations(duration: float = 30.0, seeds: int = 2) -> list[dict[str, Any]]:
+    """Synthetic teleoperation recordings at 30 and 100 Hz through time_demonstration."""
+    robot = taplan.Robot.teleavatar()
+    limits = robot.planning_limits.subset(robot.group("right").joint_names)
+    rows = []
+    for rate in (30.0, 100.0):
+        for seed in range(seeds):
+            t, q = teleoperation_recording(limits, rate, duration, 500 + seed)
+            start = time.perf_counter()
+            result = time_demonstration(t, q, limits, robot=robot)
+            ms = (time.perf_counter() - start) * 1e3
+            usage = limit_usage(result.trajectory, limits)
+            rows.append(
+                {
+                    "rate_hz": rate,
+                    "seed": seed,
+                    "samples": len(t),
+                    "ms": ms,
+                    "recording_s": result.recording_duration,
+                    "duration_s": result.trajectory.duration,
+                    "ratio": result.duration_ratio,
+                    "deviation_mrad": result.max_deviation * 1e3,
+                    "hand_mm": max(result.frame_deviation.values()) * 1e3,
+                    "knots": len(result.waypoints),
+                    "slowdowns": len(result.slowdowns),
+                    "added_s": sum(s.added for s in result.slowdowns),
+                    "worst_limit": max(usage.max_velocity, usage.max_acceleration, usage.max_jerk),
+                    "position": float(usage.position.max()),
+                }
+            )
+    return rows
+
+
+def _sweep_markdown(result: dict[str, Any]) -> list[str]:
+    rows = [
+        [name, e["paths"], e["refusals"], e["violations"], f"{e['worst']:.9f}"] for name, e in result["methods"].items()
+    ]
+    ok = all(e["refusals"] == 0 and e["violations"] == 0 for e in result["methods"].values())
+    lines = [
+        "### Near-bound sweep (issue 21)",
+        "",
+        f"{result['paths']} seeded paths (`benchmarks._paths.near_bound_walk`, right arm, planning limits) of "
+        f"{min(result['sizes'])}-{max(result['sizes'])} waypoints: random steps clipped onto the bounds, joints set "
+        "onto a bound or within 1 mrad of it, duplicates, tiny steps (1e-8-1e-4 rad), reversals. The path filter "
+        f"runs on every {PATH_METHOD_EVERY}th path of <= 10 waypoints. Violations are exact peaks over 1 + 1e-6 of a "
+        "limit or a position more than 1e-9 rad outside the bounds; the tests add a 10 kHz finite-difference check.",
+        "",
+        _harness.markdown_table(["method", "paths", "refusals", "violations", "worst peak / limit"], rows),
+        "",
+        f"- 0 refusals and 0 violations: **{'met' if ok else 'NOT met'}**",
+    ]
+    for e in result["methods"].values():
+        lines += [f"  - refused: {err}" for err in e["errors"][:5]]
+    return lines
+
+
+def _demonstration_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    table = [
+        [
+            f"{r['rate_hz']:.0f}",
+            r["samples"],
+            f"{r['ms']:.0f}",
+            f"{r['recording_s']:.2f}",
+            f"{r['duration_s']:.2f}",
+            f"{r['ratio']:.3f}",
+            f"{r['added_s']:.2f}",
+            f"{r['deviation_mrad']:.2f}",
+            f"{r['hand_mm']:.2f}",
+            r["knots"],
+            f"{r['worst_limit']:.6f}",
+        ]
+        for r in rows
+    ]
+    header = [
+        "rate [Hz]",
+        "samples",
+        "compute [ms]",
+        "recording [s]",
+        "trajectory [s]",
+        "ratio",
+        "slowed [s]",
+        "deviation [mrad]",
+        "hand [mm]",
+        "knots",
+        "worst peak / limit",
+    ]
+    return [
+        "### Recorded demonstrations (issue 21)",
+        "",
+        "Synthetic teleoperation recordings (`benchmarks._paths.teleoperation_recording`: three slow sines per joint "
+        "clipped onto the bounds, 5 % timing jitter, 0.5 mrad white noise) through `taplan.timing.time_demonstration` "
+        "(least-squares fit with adaptive knots, bounded path, jerk-limited path timing capped at the recording's "
+        "speed, `max_deviation` 10 mrad, hands 5 mm). `slowed` is the time added where the trajectory plays slower "
+        "than recorded (starting and stopping at rest included).",
+        "",
+        _harness.markdown_table(header, table),
+    ]
 
 
 METHODS = (
@@ -251,6 +391,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-jerk", action="store_true", help="skip the jerk-limited method")
     parser.add_argument("--no-save", action="store_true", help="print only")
     parser.add_argument("--large", default="1000,5000", help="extra sizes planned once each (jerk_limited, retime)")
+    parser.add_argument("--sweep", type=int, default=1000, help="near-bound sweep paths (0: skip)")
     args = parser.parse_args(argv)
     sizes = (10, 50) if args.quick else SIZES
     seeds = 1 if args.quick else args.seeds
@@ -258,6 +399,12 @@ def main(argv: list[str] | None = None) -> int:
     large = () if args.quick else tuple(int(x) for x in args.large.split(",") if x.strip())
     results = run(sizes, seeds, repeats, jerk=not args.no_jerk, large=large)
     text = markdown(results, seeds)
+    count = min(args.sweep, 60) if args.quick else args.sweep
+    if count > 0:
+        results["sweep"] = sweep(count)
+        text += "\n\n" + "\n".join(_sweep_markdown(results["sweep"]))
+    results["demonstrations"] = demonstrations(duration=10.0 if args.quick else 30.0, seeds=1 if args.quick else 2)
+    text += "\n\n" + "\n".join(_demonstration_markdown(results["demonstrations"]))
     print(text)
     if not args.no_save:
         _harness.save("timing", results, text)

@@ -177,12 +177,16 @@ def test_jerk_limited_holds_all_limits_and_is_near_optimal(arm_limits: taplan.Jo
         assert result.deviation <= 0.05  # the default max_deviation [rad]
 
 
-def test_jerk_limited_joint_method_duration_is_topp_plus_the_filter_width(arm_limits: taplan.JointLimits) -> None:
+def test_jerk_limited_joint_method_duration_is_topp_plus_less_than_the_filter_width(
+    arm_limits: taplan.JointLimits,
+) -> None:
     q = random_walk(arm_limits, 30, 5)
     result = jerk_limited(q, arm_limits)
     width = float(np.max(2 * arm_limits.acceleration / arm_limits.jerk))
     assert result.width == pytest.approx(width)
-    np.testing.assert_allclose(result.trajectory.duration, result.topp_duration * result.time_scale + width, rtol=1e-9)
+    topp = result.topp_duration * result.time_scale
+    # the filter adds its width; ruckig's starts and stops (full jerk instead of the filter's half) take some back
+    assert topp + 0.5 * width < result.trajectory.duration < topp + width - 0.02
     assert 1.0 <= result.time_scale < 1.01  # only toppra's rounding excess is scaled away
     assert result.duration_ratio < 1.05
     usage = limit_usage(result.trajectory, arm_limits)
@@ -250,3 +254,17 @@ def test_synchronise_together_and_independent(teleavatar: taplan.Robot) -> None:
         synchronise(wp, limits, mode="sometimes")
     with pytest.raises(InvalidInputError, match="same number"):
         synchronise({"left": wp["left"], "right": wp["right"][:2]}, limits)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_jerk_limited_within_5_percent_of_topp_on_10_waypoints(arm_limits: taplan.JointLimits, seed: int) -> None:
+    from tests.test_timing_any_path import finite_difference_excess
+
+    q = random_walk(arm_limits, 10, 10_000 + seed)  # the benchmark's 10-waypoint paths
+    result = jerk_limited(q, arm_limits)
+    assert result.duration_ratio <= 1.05  # the goal (the filter alone: 1.05-1.065)
+    assert limit_usage(result.trajectory, arm_limits).within(0.0, jerk=True)  # exact peaks, no tolerance
+    assert finite_difference_excess(result.trajectory, arm_limits, jerk=True) <= 0.0
+    np.testing.assert_allclose(result.trajectory(0.0), q[0], atol=1e-12)
+    np.testing.assert_allclose(result.trajectory(result.trajectory.duration), q[-1], atol=1e-9)
+    assert np.max(_closest_distances(result.trajectory, q[1:-1])) <= result.deviation + 1e-4 <= 0.05 + 1e-4

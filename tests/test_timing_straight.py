@@ -60,3 +60,19 @@ def test_bad_input_is_named() -> None:
         straight_line([np.nan], [1.0], limits)
     with pytest.raises(InvalidInputError, match="limits"):
         straight_line([0.0], [1.0], {"velocity": 1.0})
+
+
+def test_state_to_state_meets_the_goal_state_within_the_limits(teleavatar) -> None:
+    from taplan.timing import limit_usage
+    from taplan.timing.straight import state_to_state
+
+    limits = teleavatar.planning_limits.subset(teleavatar.group("left").joint_names)
+    rng = np.random.default_rng(21)
+    q0 = teleavatar.home[:7]
+    goal = (q0 + rng.uniform(-0.3, 0.3, 7), 0.3 * limits.velocity * rng.uniform(-1, 1, 7), np.zeros(7))
+    start = (q0, np.zeros(7), 0.5 * limits.acceleration * rng.uniform(-1, 1, 7))
+    motion = state_to_state(start, goal, limits)
+    for k in range(3):  # exact cubic pieces: the states at both ends to 1e-9
+        np.testing.assert_allclose(motion(0.0, k), start[k], atol=1e-9)
+        np.testing.assert_allclose(motion(motion.duration, k), goal[k], atol=1e-7)
+    assert limit_usage(motion, limits).within(1e-9, jerk=True)

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from math import comb
+
 import numpy as np
 
 from taplan.trajectory import Trajectory
 
-__all__ = ["compose_quadratic", "max_abs_derivative", "time_scaled"]
+__all__ = ["compose_quadratic", "concatenated", "max_abs_derivative", "position_range", "sliced", "time_scaled"]
 
 _SAMPLES = 12  # samples per segment before locating the extrema by bisection
 _BISECTIONS = 48
@@ -102,3 +104,66 @@ def _eval_rows(c: np.ndarray, x: np.ndarray) -> np.ndarray:
 def time_scaled(traj: Trajectory, factor: float) -> Trajectory:
     """The same motion ``factor`` times slower (>1) or faster (<1): velocities / factor, accelerations / factor²."""
     return traj.stretched(factor)
+
+
+def sliced(traj: Trajectory, start: float, end: float) -> Trajectory:
+    """The part of ``traj`` between ``start`` and ``end`` [s], exact, re-timed to start at 0."""
+    times = traj.times
+    inner = times[(times > start + 1e-12) & (times < end - 1e-12)]
+    breaks = np.concatenate([[start], inner, [end]])
+    k = np.clip(np.searchsorted(times, breaks[:-1], side="right") - 1, 0, len(times) - 2)
+    c = traj.coefficients[k]
+    shift = breaks[:-1] - times[k]
+    degree = c.shape[1] - 1
+    out = np.zeros_like(c)
+    for j in range(degree + 1):  # re-expand each piece about its new start
+        for i in range(j, degree + 1):
+            out[:, j] += comb(i, j) * (shift[:, None] ** (i - j)) * c[:, i]
+    return Trajectory.from_polynomials(breaks - start, out, traj.joint_names)
+
+
+def concatenated(parts: list[Trajectory]) -> Trajectory:
+    """The trajectories one after the other (each starting where the previous one ends), exact."""
+    width = max(p.coefficients.shape[1] for p in parts)
+    times, pieces, offset = [0.0], [], 0.0
+    for part in parts:
+        times += list(offset + part.times[1:] - part.times[0])
+        c = part.coefficients
+        pieces.append(np.pad(c, ((0, 0), (0, width - c.shape[1]), (0, 0))))
+        offset += part.duration
+    return Trajectory.from_polynomials(np.array(times), np.concatenate(pieces), parts[0].joint_names)
+
+
+def position_range(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Exact lowest and highest position of each joint over all pieces, shape (n,) each (closed form for cubics,
+    polynomial roots above)."""
+    c = traj.coefficients
+    if c.shape[1] > 4 and np.any(c[:, 4:]):
+        return _position_range_roots(traj)
+    h = np.diff(traj.times)[:, None]
+    c0, c1, c2, c3 = (c[:, i] for i in range(4))
+    # extrema where c1 + 2 c2 x + 3 c3 x² = 0, inside [0, h]
+    candidates = [np.zeros_like(c0), np.broadcast_to(h, c0.shape)]
+    disc = np.maximum(4 * c2**2 - 12 * c3 * c1, 0.0)
+    safe = np.where(np.abs(c3) > 1e-300, 6 * c3, np.inf)
+    linear = np.where(np.abs(c2) > 1e-300, -c1 / np.where(np.abs(c2) > 1e-300, 2 * c2, 1.0), 0.0)
+    for sign in (-1.0, 1.0):
+        root = np.where(np.isfinite(safe), (-2 * c2 + sign * np.sqrt(disc)) / safe, linear)
+        candidates.append(np.clip(root, 0.0, h))
+    x = np.stack(candidates)  # (4, m, n)
+    values = c0 + x * (c1 + x * (c2 + x * c3))
+    return values.min(axis=(0, 1)), values.max(axis=(0, 1))
+
+
+def _position_range_roots(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    c = traj.coefficients
+    h = np.diff(traj.times)
+    low, high = np.full(c.shape[2], np.inf), np.full(c.shape[2], -np.inf)
+    for k in range(c.shape[0]):
+        for j in range(c.shape[2]):
+            poly = np.polynomial.Polynomial(c[k, :, j])
+            roots = poly.deriv().roots()
+            real = roots[(np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < h[k])].real
+            values = poly(np.concatenate([[0.0, h[k]], real]))
+            low[j], high[j] = min(low[j], values.min()), max(high[j], values.max())
+    return low, high

@@ -47,11 +47,19 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from taplan.errors import InvalidInputError
+from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.timing._fir import moving_average
-from taplan.timing._polynomial import compose_quadratic, max_abs_derivative, time_scaled
+from taplan.timing._polynomial import (
+    compose_quadratic,
+    concatenated,
+    max_abs_derivative,
+    position_range,
+    sliced,
+    time_scaled,
+)
 from taplan.timing.path import Path
+from taplan.timing.straight import state_to_state
 from taplan.timing.toppra_retime import (
     DEFAULT_POINTS_PER_SEGMENT,
     LIMIT_MARGIN,
@@ -71,6 +79,7 @@ logger = logging.getLogger(__name__)
 DEFAULT_MAX_DEVIATION = 0.05  # [rad] interior waypoints may be cut by this much ("joint" method)
 DEVIATION_REPAIRS = 4  # TOPP-RA re-solves slowing the corners that are cut more
 MIN_SLOWDOWN = 0.25  # smallest factor on a corner's limits per repair
+RUCKIG_MARGIN = 1e-7  # relative: ruckig plans the start and stop this far inside the limits (rounding ~1e-12)
 _APPROACH_SAMPLES = 21
 _APPROACH_REFINEMENTS = 3
 DEFAULT_WIDTH_FACTORS = (1.5, 2.0, 2.5)  # x max_j(a_j / j_j)
@@ -323,11 +332,64 @@ def _joint_filter(
         deviation = _closest_approach(filtered, interior, passing, width)
         worst = float(deviation.max(initial=0.0))
         if worst <= max_deviation:
+            trimmed = _ruckig_ends(filtered, width, limits, interior, passing, max_deviation)
+            if trimmed is not None:
+                return JerkLimitedResult(trimmed[0], topp_duration, width, c, "joint", trimmed[1])
             return JerkLimitedResult(filtered, topp_duration, width, c, "joint", worst)
         for k in np.flatnonzero(deviation > max_deviation):
             near = np.abs(c * profile.times - passing[k]) <= width
             scale[near] *= max(MIN_SLOWDOWN, 0.9 * max_deviation / deviation[k])
     return None
+
+
+def _ruckig_ends(
+    filtered: Trajectory,
+    width: float,
+    limits: JointLimits,
+    interior: np.ndarray,
+    passing: np.ndarray,
+    max_deviation: float,
+) -> tuple[Trajectory, float] | None:
+    """The filtered trajectory with its first and last window replaced by ruckig's time-optimal motions from rest to
+    the filtered state at ``width`` and from the state at ``T - width`` to rest, or None when that is not shorter,
+    not inside every limit (exact) or cuts an interior waypoint by more than ``max_deviation``.
+
+    In its first window the moving average ramps the acceleration from 0 with at most half the jerk limit (the
+    window holds rest and motion, not a full ±a swing), and so in its last: ruckig does it with the full jerk,
+    which saves about a/j of the 2a/j the filter adds.
+    """
+    end = filtered.duration - width
+    if end <= width:
+        return None
+    states = [tuple(filtered(t, k) for k in range(3)) for t in (width, end)]
+    zero = np.zeros(limits.size)
+    q0, q1 = filtered(0.0), filtered(filtered.duration)
+    inside = limits.replace(  # ruckig's pieces reach its limits up to rounding (~1e-12): ask for a hair less
+        velocity=limits.velocity * (1 - RUCKIG_MARGIN),
+        acceleration=limits.acceleration * (1 - RUCKIG_MARGIN),
+        jerk=limits.jerk * (1 - RUCKIG_MARGIN),
+    )
+    try:
+        head = state_to_state((q0, zero, zero), states[0], inside)
+        tail = state_to_state(states[1], (q1, zero, zero), inside)
+    except TimingError:
+        return None
+    if head.duration + tail.duration >= 2 * width - 1e-9:
+        return None
+    for piece in (head, tail):
+        low, high = position_range(piece)
+        if np.any(low < limits.lower) or np.any(high > limits.upper):
+            return None
+        peaks = [max_abs_derivative(piece, order).max(axis=0) for order in (1, 2, 3)]
+        bounds = (limits.velocity, limits.acceleration, limits.jerk)
+        if any(np.any(p > b) for p, b in zip(peaks, bounds, strict=True)):
+            return None
+    out = concatenated([head, sliced(filtered, width, end), tail])
+    deviation = _closest_approach(out, interior, passing - (width - head.duration), width)
+    worst = float(deviation.max(initial=0.0))
+    if worst > max_deviation:
+        return None
+    return out, worst
 
 
 def _closest_approach(traj: Trajectory, points: np.ndarray, passing: np.ndarray, width: float) -> np.ndarray:

@@ -11,6 +11,8 @@ cubic through the position, velocity and acceleration ruckig reports at the piec
 
 from __future__ import annotations
 
+from math import comb
+
 import numpy as np
 import numpy.typing as npt
 import ruckig
@@ -20,7 +22,7 @@ from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.trajectory import Trajectory
 
-__all__ = ["straight_line"]
+__all__ = ["straight_line", "state_to_state"]
 
 _SWITCH_TOL = 1e-9  # [s] phase switches closer than this are one breakpoint
 
@@ -43,36 +45,80 @@ def straight_line(start: npt.ArrayLike, goal: npt.ArrayLike, limits: JointLimits
             raise InvalidInputError(name, np.round(q, 6).tolist(), "a configuration within the position limits")
     if np.array_equal(a, b):
         raise InvalidInputError("goal", "the start configuration", "a goal that differs from the start")
+    zero = np.zeros(n)
+    trajectory = _ruckig_motion((a, zero, zero), (b, zero, zero), limits, ruckig.Synchronization.Phase)
+    if not np.allclose(trajectory(trajectory.duration), b, atol=1e-7):
+        raise TimingError("ruckig's straight-line motion does not end at the goal")
+    return trajectory
+
+
+def state_to_state(
+    start: tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike],
+    goal: tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike],
+    limits: JointLimits,
+) -> Trajectory:
+    """The time-optimal jerk-limited motion from one state ``(position, velocity, acceleration)`` to another
+    (ruckig, every joint arriving together), as exact cubic pieces. The joints move independently in between: the
+    motion is not along any given path, and positions are not bounded (check them).
+
+    Raises:
+        InvalidInputError: malformed states. TimingError: ruckig found no trajectory, or its pieces do not meet the
+            goal state (1e-9).
+    """
+    n = len(limits.names)
+    a = tuple(as_vector(x, f"start[{i}]", n) for i, x in enumerate(start))
+    b = tuple(as_vector(x, f"goal[{i}]", n) for i, x in enumerate(goal))
+    trajectory = _ruckig_motion(a, b, limits, ruckig.Synchronization.Time)
+    for k in range(3):
+        if not np.allclose(trajectory(trajectory.duration, k), b[k], atol=1e-9 * max(1.0, float(np.abs(b[k]).max()))):
+            raise TimingError("ruckig's state-to-state motion does not end at the goal state")
+    return trajectory
+
+
+def _ruckig_motion(
+    start: tuple[np.ndarray, ...], goal: tuple[np.ndarray, ...], limits: JointLimits, synchronization: object
+) -> Trajectory:
+    n = len(limits.names)
     generator = ruckig.Ruckig(n)
     request = ruckig.InputParameter(n)
-    request.current_position = a.tolist()
-    request.target_position = b.tolist()
-    request.current_velocity = request.current_acceleration = [0.0] * n
-    request.target_velocity = request.target_acceleration = [0.0] * n
+    request.current_position, request.current_velocity, request.current_acceleration = (x.tolist() for x in start)
+    request.target_position, request.target_velocity, request.target_acceleration = (x.tolist() for x in goal)
     request.max_velocity = limits.velocity.tolist()
     request.max_acceleration = limits.acceleration.tolist()
     request.max_jerk = limits.jerk.tolist()
-    request.synchronization = ruckig.Synchronization.Phase
+    request.synchronization = synchronization
     motion = ruckig.Trajectory(n)
     try:
         result = generator.calculate(request, motion)
-    except RuntimeError as exc:
-        raise TimingError(f"ruckig: {exc}") from exc
+    except (RuntimeError, ruckig.RuckigError) as exc:  # RuckigError: e.g. a target state it cannot reach
+        raise TimingError(f"ruckig: {str(exc).strip() or type(exc).__name__}") from exc
     if result not in (ruckig.Result.Working, ruckig.Result.Finished):
-        raise TimingError(f"ruckig found no straight-line motion ({result.name})")
+        raise TimingError(f"ruckig found no motion ({result.name})")
     switches = [0.0, motion.duration]
-    for profile in motion.profiles[0]:
+    for profile in motion.profiles[0]:  # every joint's phase switches: the jerk is constant in between
         switches += np.cumsum(profile.t).tolist()
     times = np.unique(np.clip(switches, 0.0, motion.duration))
     times = times[np.concatenate([[True], np.diff(times) > _SWITCH_TOL])]
     times[-1] = motion.duration
     states = [motion.at_time(float(t)) for t in times]
-    coefficients = np.zeros((len(times) - 1, 4, n))
+    # the pieces are integrated from the start state with ruckig's constant jerk per piece, so they join exactly;
+    # the few 1e-12 ruckig's states drift by are removed at the end by a quintic spread over the whole motion
+    coefficients = np.zeros((len(times) - 1, 6, n))
+    p, v, acc = start
     for k, dt in enumerate(np.diff(times)):
-        p, v, acc = (np.asarray(x, dtype=float) for x in states[k])
-        jerk = (np.asarray(states[k + 1][2], dtype=float) - acc) / dt
-        coefficients[k] = [p, v, acc / 2, jerk / 6]
-    trajectory = Trajectory.from_polynomials(times - times[0], coefficients, limits.names)
-    if not np.allclose(trajectory(trajectory.duration), b, atol=1e-7):
-        raise TimingError("ruckig's straight-line motion does not end at the goal")
-    return trajectory
+        jerk = (np.asarray(states[k + 1][2], dtype=float) - np.asarray(states[k][2], dtype=float)) / dt
+        coefficients[k, :4] = [p, v, acc / 2, jerk / 6]
+        p, v, acc = p + dt * (v + dt * (acc / 2 + dt * jerk / 6)), v + dt * (acc + dt * jerk / 2), acc + dt * jerk
+    total = float(times[-1] - times[0])
+    e0, e1, e2 = goal[0] - p, goal[1] - v, goal[2] - acc
+    top = [  # x³, x⁴, x⁵ coefficients of the correction: zero state at 0, (e0, e1, e2) at ``total``
+        (10 * e0 - 4 * e1 * total + 0.5 * e2 * total**2) / total**3,
+        (-15 * e0 + 7 * e1 * total - e2 * total**2) / total**4,
+        (6 * e0 - 3 * e1 * total + 0.5 * e2 * total**2) / total**5,
+    ]
+    start_times = times[:-1] - times[0]
+    for k, t0 in enumerate(start_times):  # the correction re-expanded about each piece's start
+        for power, c in zip((3, 4, 5), top, strict=True):
+            for j in range(power + 1):
+                coefficients[k, j] += comb(power, j) * t0 ** (power - j) * c
+    return Trajectory.from_polynomials(times - times[0], coefficients, limits.names)
