@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 from typing import Any
 
@@ -397,7 +398,9 @@ def main(argv: list[str] | None = None) -> int:
     seeds = 1 if args.quick else args.seeds
     repeats = 1 if args.quick else args.repeats
     large = () if args.quick else tuple(int(x) for x in args.large.split(",") if x.strip())
+    load_before = os.getloadavg()  # 8 engineers share 2 cores: figures are measured under this load
     results = run(sizes, seeds, repeats, jerk=not args.no_jerk, large=large)
+    results["loadavg_before"] = load_before
     text = markdown(results, seeds)
     count = min(args.sweep, 60) if args.quick else args.sweep
     if count > 0:
@@ -405,6 +408,7 @@ def main(argv: list[str] | None = None) -> int:
         text += "\n\n" + "\n".join(_sweep_markdown(results["sweep"]))
     results["demonstrations"] = demonstrations(duration=10.0 if args.quick else 30.0, seeds=1 if args.quick else 2)
     text += "\n\n" + "\n".join(_demonstration_markdown(results["demonstrations"]))
+    results["loadavg_after"] = os.getloadavg()
     print(text)
     if not args.no_save:
         _harness.save("timing", results, text)
