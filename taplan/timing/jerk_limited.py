@@ -17,7 +17,8 @@ positions are averages of positions within the limits. With ``w = max_j(2 a_j / 
 construction. The input's peaks are computed exactly on its polynomial pieces (toppra's rounding excess, if any, is
 removed from the input by uniform time scaling), so the output's peaks are bounded exactly, not sampled. The
 filter alone lasts ``T + w`` (0.2 s with taplan's default jerk = 10 x acceleration); with the ruckig starts and
-stops below, about ``T + 0.65 w``: under 5 % above TOPP-RA for motions of a few seconds, under 1 % for long paths. The first and last waypoints are met exactly; interior waypoints
+stops below, about ``T + 0.65 w``: under 5 % above TOPP-RA for motions of a few seconds, under 1 % for long paths.
+The first and last waypoints are met exactly; interior waypoints
 are cut like a blend (the filter averages ``w`` of motion around a corner). The deviation is measured per waypoint;
 where it exceeds ``max_deviation`` TOPP-RA's limits near that waypoint are scaled down (slower corners are cut less:
 about speed² w² curvature) and TOPP-RA is solved again.
