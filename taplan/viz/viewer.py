@@ -58,6 +58,8 @@ def check_port(host: str, port: Any) -> int:
     if port == 0:
         return 0
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as probe:
+        # like viser's server: a port left in TIME_WAIT by a viewer just stopped is free; a listening one is not
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             probe.bind((host, port))
         except OSError as exc:
