@@ -53,8 +53,6 @@ def _origin(element: ET.Element | None) -> np.ndarray:
 
 def visual_meshes(urdf_path: str | Path) -> tuple[list[VisualMesh], list[str]]:
     """The URDF's visual meshes that exist and load, and the files skipped (with the reason)."""
-    import trimesh
-
     urdf = Path(urdf_path)
     root = ET.parse(urdf).getroot()
     meshes: list[VisualMesh] = []
@@ -69,6 +67,8 @@ def visual_meshes(urdf_path: str | Path) -> tuple[list[VisualMesh], list[str]]:
             if path is None:
                 skipped.append(f"{filename} (not found)")
                 continue
+            import trimesh  # here: its import (scipy) costs a second, and most URDFs of ours have no meshes
+
             try:
                 loaded = trimesh.load(path, force="mesh")
                 vertices = np.asarray(loaded.vertices, dtype=float)
