@@ -133,9 +133,19 @@ class CollisionWorld:
         scene: Obstacles and attached objects (changes are picked up through ``scene.version``); None: self only.
         margin: Default clearance [m] for :meth:`in_collision` and :meth:`check_configuration`.
         self_collision: Include robot-robot pairs.
+        engine: Evaluate batches (:meth:`distances_many`, :meth:`distance_matrix`) with the batched closed-form
+            engine (:mod:`taplan.scene.engine`) where the scene allows; False: coal for every obstacle pair.
     """
 
-    def __init__(self, robot: Robot, scene: Scene | None = None, *, margin: float = 0.0, self_collision: bool = True):
+    def __init__(
+        self,
+        robot: Robot,
+        scene: Scene | None = None,
+        *,
+        margin: float = 0.0,
+        self_collision: bool = True,
+        engine: bool = True,
+    ):
         import coal
 
         self._coal = coal
@@ -183,6 +193,8 @@ class CollisionWorld:
         self._items: list[_Item] = []
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
+        self.use_engine = bool(engine)
+        self._engine: Any = None
 
     # ----------------------------------------------------------------------------------------------- helpers
     def _chain_reach(self, joint: int, extent: float) -> np.ndarray:
@@ -280,6 +292,10 @@ class CollisionWorld:
         self._refresh()
         if self._attached_items() or not np.all(np.isfinite(Q)):
             return [self.distances(q, cutoff=cutoff) for q in Q]
+        engine = self.engine()
+        if engine is not None:
+            batch = engine.evaluate(Q, jacobian=True)
+            return [self._from_batch(batch, n, cutoff) for n in range(len(Q))]
         model, data = self.model, self.data
         joints = self._body_joint.tolist()
         N, B = len(Q), len(self.bodies)
@@ -309,6 +325,61 @@ class CollisionWorld:
         for n in range(N) if self._fields else ():
             parts[n] += self._field_distances(starts[n], ends[n], cutoff, math.inf)
         return [self._joined(parts[n], jacobians[n]) for n in range(N)]
+
+    def engine(self) -> Any:
+        """The batched distance engine for the current scene (:class:`~taplan.scene.engine.DistanceEngine`), or
+        None when it is disabled or the scene has obstacles without a closed form (meshes, occupancy)."""
+        from taplan.scene.engine import DistanceEngine, supports
+
+        self._refresh()
+        if not self.use_engine or self._fields or not supports(self):
+            return None
+        if self._engine is None:
+            self._engine = DistanceEngine(self)
+        return self._engine
+
+    def distance_matrix(self, configurations: npt.ArrayLike, *, bound_beyond: float = math.inf) -> Any:
+        """Every pair (no cutoff) at N configurations (N, nq) as one :class:`~taplan.scene.engine.BatchDistances`
+        without Jacobians: the engine's batch where it applies (scenes without attached objects), else the pairs of
+        :meth:`distances` per configuration aligned by name (a pair missing at a configuration: +inf). Robot-obstacle
+        pairs whose bounding spheres are farther apart than ``bound_beyond`` [m] report that gap (a lower bound)."""
+        from taplan.scene.engine import BatchDistances
+
+        Q = np.asarray(configurations, dtype=float)
+        if Q.ndim != 2 or Q.shape[1] != self.model.nq:
+            raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
+        engine = self.engine()
+        if engine is not None and not self._attached_items() and np.all(np.isfinite(Q)):
+            return engine.evaluate(Q, jacobian=False, bound_beyond=bound_beyond)
+        each = [self.distances(q, jacobian=False, bound_beyond=bound_beyond) for q in Q]
+        index: dict[tuple[str, str], int] = {}
+        for d in each:
+            for pair in d.pairs:
+                index.setdefault(pair, len(index))
+        N, P, nv = len(Q), len(index), self.model.nv
+        distance = np.full((N, P), np.inf)
+        points = np.zeros((N, P, 3))
+        travel = np.zeros((P, nv))
+        for n, d in enumerate(each):
+            columns = np.array([index[pair] for pair in d.pairs], dtype=int)
+            distance[n, columns] = d.distance
+            assert d.travel is not None
+            travel[columns] = d.travel
+        owners = np.zeros(P, dtype=int)
+        return BatchDistances(tuple(index), distance, points, points, points, None, travel, owners, owners)
+
+    def _from_batch(self, batch: Any, n: int, cutoff: float) -> Distances:
+        """Configuration ``n`` of an engine batch as :class:`Distances` (pairs within ``cutoff``, the world's order)."""
+        keep = np.flatnonzero(batch.distance[n] <= cutoff)
+        return Distances(
+            tuple(batch.pairs[k] for k in keep),
+            batch.distance[n, keep],
+            batch.point_a[n, keep],
+            batch.point_b[n, keep],
+            batch.normal[n, keep],
+            None if batch.jacobian is None else batch.jacobian[n, keep],
+            batch.travel[keep],
+        )
 
     def _joined(self, parts: list[_Pairs], J: np.ndarray | None) -> Distances:
         """One :class:`Distances` from the parts, with ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))`` from the WORLD-frame

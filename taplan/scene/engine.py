@@ -1,0 +1,581 @@
+"""A distance engine for batches of configurations: the robot's capsules against themselves and against closed-form
+obstacles, with witness points, normals and Jacobians, for N configurations in one call.
+
+Per configuration the robot is a set of capsules (:mod:`taplan.scene.robot_bodies`). Their end points and the end
+points' Jacobians come from one generated and compiled CasADi function of ``q`` (the approach of the IK kernel,
+:mod:`taplan.ik._native`: a few microseconds per configuration), or from pinocchio when no C compiler is available.
+Every distance is then computed in closed form with numpy over all configurations and pairs at once:
+
+* robot capsule vs robot capsule, vs obstacle capsule and vs sphere: segment–segment (a sphere is a segment of zero
+  length) minus the radii;
+* vs half-space: the lower end point's height minus the radius;
+* vs box: the exact squared distance from the segment to the box is a convex piecewise quadratic in the segment
+  parameter whose pieces end where the segment crosses a face plane (at most six crossings): each piece is minimised
+  in closed form;
+* vs cylinder: the distance from a point to a solid cylinder is convex, so is its restriction to the segment: a
+  golden-section search narrows the parameter to 1e-10 (distance error below 1e-10 m).
+
+A capsule whose axis touches or enters a box or cylinder has a penetration depth that is not a point distance:
+those pairs (only in collision) are handed to coal's EPA, as are meshes. The Jacobian of a distance with unit
+normal ``n`` (from b to a) and witness parameter ``s`` on a robot segment ``[e0, e1]`` is
+``n · ((1 − s) J(e0) + s J(e1))`` (minus the same for a robot member b): a point's Jacobian is affine in the point,
+and the witness's offset ``r n`` from the axis adds ``n · (ω × n) = 0``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pinocchio as pin
+
+from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Sphere
+
+if TYPE_CHECKING:
+    from taplan.scene.world import CollisionWorld
+
+__all__ = ["BatchDistances", "DistanceEngine", "segment_box", "segment_cylinder"]
+
+GOLDEN_ITERATIONS = 48  # 0.618^48 < 1e-10: the cylinder search's parameter interval
+_TINY = 1e-18
+_CLOSED = (Box, Sphere, Capsule, Cylinder, HalfSpace)
+
+
+@dataclass(frozen=True)
+class BatchDistances:
+    """Every pair at N configurations (no cutoff).
+
+    Attributes:
+        pairs: ``(robot body, other body or obstacle)`` names: the robot pairs, then obstacle-major
+            (every moving body against the first obstacle, then the second, ...). P pairs.
+        distance: Signed distances [m] (N, P).
+        point_a: Witness points on the robot body [m] (N, P, 3).
+        point_b: Witness points on the other member [m] (N, P, 3).
+        normal: Unit vectors from b to a (N, P, 3).
+        jacobian: ``∂distance/∂q`` [m/rad] (N, P, nv), or None.
+        travel: Reach coefficients per pair [m/rad] (P, nv) (:class:`~taplan.scene.world.Distances`).
+        owner_a: Joint carrying the first member (P,). owner_b: the second's (0: fixed) (P,).
+    """
+
+    pairs: tuple[tuple[str, str], ...]
+    distance: np.ndarray
+    point_a: np.ndarray
+    point_b: np.ndarray
+    normal: np.ndarray
+    jacobian: np.ndarray | None
+    travel: np.ndarray
+    owner_a: np.ndarray
+    owner_b: np.ndarray
+
+
+def supports(world: CollisionWorld) -> bool:
+    """Whether the engine covers the world's scene (obstacles of closed-form shapes; attached objects and other
+    obstacles are evaluated by the world itself)."""
+    return all(isinstance(o.shape, _CLOSED) for o in world.scene.obstacles.values())
+
+
+class DistanceEngine:
+    """Batched distances of a :class:`~taplan.scene.world.CollisionWorld`'s robot bodies and closed-form obstacles.
+
+    Built from the world's bodies and allowed pairs (any set of capsules and spheres on any joints), so a robot with
+    more bodies needs nothing here. Obstacles are read again when the scene's version changes.
+    """
+
+    def __init__(self, world: CollisionWorld) -> None:
+        self.world = world
+        self.model = world.model
+        bodies = world.bodies
+        self.B = len(bodies)
+        self.radius = np.array([b.radius for b in bodies])
+        self.joint = np.array([b.joint for b in bodies], dtype=int)
+        self.movers = world._movers
+        self.self_i, self.self_j = world._self_index
+        self.self_names = list(world._self_names)
+        self._kinematics = _Kinematics(world)
+        self._version = -1
+        import coal
+
+        # penetration depths (the only pairs left to coal) to the engine's own accuracy, not GJK's default 1e-6 m
+        self._request = coal.DistanceRequest()
+        self._request.enable_signed_distance = True
+        self._request.gjk_tolerance = 1e-12
+        self._request.epa_tolerance = 1e-12
+
+    # ------------------------------------------------------------------------------------------------ scene
+    def _refresh(self) -> None:
+        scene = self.world.scene
+        if scene.version == self._version:
+            return
+        obstacles = [o for o in scene.obstacles.values() if isinstance(o.shape, _CLOSED)]
+        self.obstacles = obstacles
+        self.kind = np.array([_KINDS[type(o.shape)] for o in obstacles], dtype=int)
+        self.rotation = np.array([o.pose[:3, :3] for o in obstacles]).reshape(-1, 3, 3)
+        self.center = np.array([o.pose[:3, 3] for o in obstacles]).reshape(-1, 3)
+        self.bounding = np.array([o.shape.bounding_radius() for o in obstacles])
+        self.half = np.array([_half_extents(o.shape) for o in obstacles]).reshape(-1, 3)
+        self.obstacle_radius = np.array([getattr(o.shape, "radius", 0.0) for o in obstacles])
+        self.coal_geometry = [o.shape.to_coal() for o in obstacles]
+        self._version = scene.version
+
+    @property
+    def pair_names(self) -> list[tuple[str, str]]:
+        self._refresh()
+        bodies = self.world.bodies
+        names = list(self.self_names)
+        names += [(bodies[b].name, o.name) for o in self.obstacles for b in self.movers]
+        return names
+
+    # --------------------------------------------------------------------------------------------- evaluate
+    def segments(self, Q: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Body segment end points (N, B, 2, 3) [m] and their Jacobians (N, B, 2, 3, nv) or None."""
+        return self._kinematics(np.asarray(Q, dtype=float), jacobian)
+
+    def evaluate(
+        self, Q: np.ndarray, *, jacobian: bool = True, bound_beyond: float = math.inf, obstacles: bool = True
+    ) -> BatchDistances:
+        """All pairs at the configurations ``Q`` (N, nq). Robot–obstacle pairs whose bounding spheres are more than
+        ``bound_beyond`` [m] apart report that gap (a lower bound of their distance) without the exact query."""
+        self._refresh()
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        E, JE = self.segments(Q, jacobian)
+        N = len(Q)
+        parts = [self._self_pairs(E, JE)]
+        if obstacles and self.obstacles:
+            parts.append(self._obstacle_pairs(E, JE, bound_beyond))
+        d = np.concatenate([p[0] for p in parts], axis=1)
+        pa = np.concatenate([p[1] for p in parts], axis=1)
+        pb = np.concatenate([p[2] for p in parts], axis=1)
+        n = np.concatenate([p[3] for p in parts], axis=1)
+        J = np.concatenate([p[4] for p in parts], axis=1) if jacobian else None
+        names = self.self_names + (
+            [(self.world.bodies[b].name, o.name) for o in self.obstacles for b in self.movers]
+            if obstacles and self.obstacles
+            else []
+        )
+        reach = self.world._body_reach
+        M = len(self.obstacles) if obstacles else 0
+        travel = np.concatenate([reach[self.self_i] + reach[self.self_j], np.tile(reach[self.movers], (M, 1))])
+        owner_a = np.concatenate([self.joint[self.self_i], np.tile(self.joint[self.movers], M)])
+        owner_b = np.concatenate([self.joint[self.self_j], np.zeros(M * len(self.movers), dtype=int)])
+        assert d.shape == (N, len(names))
+        return BatchDistances(tuple(names), d, pa, pb, n, J, travel, owner_a, owner_b)
+
+    def _self_pairs(self, E: np.ndarray, JE: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        i, j = self.self_i, self.self_j
+        N, S = len(E), len(i)
+        a0, a1 = E[:, i, 0].reshape(-1, 3), E[:, i, 1].reshape(-1, 3)
+        b0, b1 = E[:, j, 0].reshape(-1, 3), E[:, j, 1].reshape(-1, 3)
+        s, t = _segment_parameters(a0, a1, b0, b1)
+        pa, pb = a0 + s[:, None] * (a1 - a0), b0 + t[:, None] * (b1 - b0)
+        delta = pa - pb
+        norm = np.linalg.norm(delta, axis=1)
+        normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+        ri, rj = np.tile(self.radius[i], N), np.tile(self.radius[j], N)
+        d = norm - ri - rj
+        pa, pb = pa - ri[:, None] * normal, pb + rj[:, None] * normal
+        rows = None
+        if JE is not None:
+            s2, t2 = s.reshape(N, S), t.reshape(N, S)
+            nn = normal.reshape(N, S, 3)
+            rows = _row(JE[:, i], s2, nn) - _row(JE[:, j], t2, nn)
+        shape = (N, S)
+        return d.reshape(shape), pa.reshape(*shape, 3), pb.reshape(*shape, 3), normal.reshape(*shape, 3), rows
+
+    def _obstacle_pairs(self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float) -> tuple[np.ndarray, ...]:
+        """Moving bodies vs obstacles, obstacle-major (N, M, Bm) flattened to (N, M·Bm)."""
+        movers = self.movers
+        N, M, Bm = len(E), len(self.obstacles), len(movers)
+        # every pair in the obstacle's frame: (N, M, Bm, 3)
+        R, c = self.rotation, self.center
+        e0 = np.einsum("mji,nmbj->nmbi", R, E[:, movers, 0][:, None] - c[None, :, None, :])
+        e1 = np.einsum("mji,nmbj->nmbi", R, E[:, movers, 1][:, None] - c[None, :, None, :])
+        shape = (N, M, Bm)
+        radius = np.broadcast_to(self.radius[movers], shape)
+        kind = np.broadcast_to(self.kind[None, :, None], shape)
+        s = np.zeros(shape)  # witness parameter on the robot segment
+        near = np.zeros((*shape, 3))  # witness on the obstacle's core (its frame): the segment's nearest point
+        exact = np.ones(shape, dtype=bool)
+        # broad phase: the segment's distance to the obstacle's centre minus both bounding radii
+        core = _point_segment(np.zeros(3), e0, e1)
+        centre_gap = np.linalg.norm(e0 + core[..., None] * (e1 - e0), axis=-1)
+        gap = centre_gap - radius - self.bounding[None, :, None]
+        far = (gap > bound_beyond) & (kind != _HALF)
+        exact &= ~far
+        for code, solver in _SOLVERS.items():
+            pick = (kind == code) & exact
+            if pick.any():
+                s[pick], near[pick] = solver(e0[pick], e1[pick], self._parameter(code, pick))
+        s[far] = core[far]
+        p = e0 + s[..., None] * (e1 - e0)  # segment witness, obstacle frame
+        delta = p - near
+        norm = np.linalg.norm(delta, axis=-1)
+        normal = np.where(norm[..., None] > 1e-12, delta / np.maximum(norm, 1e-12)[..., None], [0.0, 0.0, 1.0])
+        core_radius = np.broadcast_to(self.obstacle_radius[None, :, None], shape)
+        rounded = (kind == _SPHERE) | (kind == _CAPSULE)
+        d = np.where(rounded, norm - core_radius, norm) - radius
+        half = kind == _HALF
+        d = np.where(half, p[..., 2] - radius, d)
+        normal = np.where(half[..., None], [0.0, 0.0, 1.0], normal)
+        near = np.where(rounded[..., None], near + core_radius[..., None] * normal, near)
+        near = np.where(half[..., None], p * [1.0, 1.0, 0.0], near)
+        d = np.where(far, gap, d)
+        pa_local = p - radius[..., None] * normal
+        # the axis touches or enters a box or cylinder: penetration depth from coal (its EPA), not a point distance
+        # (and a capsule inside a cylinder: coal's depth there, so that both paths agree to 1e-9 m)
+        inside = exact & (((norm <= 1e-12) & ~rounded & ~half) | ((kind == _CYLINDER) & (d < 0.0)))
+        # back to the root frame
+        pa = np.einsum("mij,nmbj->nmbi", R, pa_local) + c[None, :, None]
+        pb = np.einsum("mij,nmbj->nmbi", R, near) + c[None, :, None]
+        normal = np.einsum("mij,nmbj->nmbi", R, normal)
+        if far.any():  # the gap's witnesses: the segment's point nearest the centre and the centre
+            away = p - 0.0
+            direction = away / np.maximum(np.linalg.norm(away, axis=-1), 1e-12)[..., None]
+            direction = np.einsum("mij,nmbj->nmbi", R, direction)
+            normal = np.where(far[..., None], direction, normal)
+            pb = np.where(far[..., None], np.broadcast_to(c[None, :, None], pb.shape), pb)
+        for n_, m_, b_ in zip(*np.nonzero(inside), strict=True):
+            d[n_, m_, b_], pa[n_, m_, b_], pb[n_, m_, b_], normal[n_, m_, b_], s[n_, m_, b_] = self._coal(
+                E[n_, movers[b_]], movers[b_], m_
+            )
+        rows = None
+        if JE is not None:
+            rows = _row(JE[:, movers][:, None], s, normal)
+        flat = (N, M * Bm)
+        return (
+            d.reshape(flat),
+            pa.reshape(*flat, 3),
+            pb.reshape(*flat, 3),
+            normal.reshape(*flat, 3),
+            (rows.reshape(*flat, -1) if rows is not None else None),
+        )
+
+    def _parameter(self, code: int, pick: np.ndarray) -> np.ndarray:
+        """Per picked pair, the obstacle's size: half extents (box), radius and half length (cylinder), half length
+        (capsule, sphere: 0)."""
+        index = np.nonzero(pick)[1]  # the obstacle of each picked pair
+        return self.half[index]
+
+    def _coal(self, ends: np.ndarray, body: int, item: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, float]:
+        """coal's signed distance of body ``body`` (segment ``ends`` (2, 3), root frame) to obstacle ``item``, with
+        the witness parameter on the segment."""
+        import coal
+
+        world = self.world
+        start, end = ends
+        frame = _segment_pose(start, end)
+        geometry = world._body_geometry[body][0]
+        obstacle = self.obstacles[item]
+        result = coal.DistanceResult()
+        d = float(
+            coal.distance(
+                self.coal_geometry[item],
+                coal.Transform3s(obstacle.pose[:3, :3], obstacle.pose[:3, 3]),
+                geometry,
+                coal.Transform3s(frame[:3, :3], frame[:3, 3]),
+                self._request,
+                result,
+            )
+        )
+        pb, pa = np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2())
+        n = np.array(result.normal, dtype=float)
+        norm = float(np.linalg.norm(n))
+        n = n / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
+        axis = end - start
+        s = float(np.clip((pa + world.bodies[body].radius * n - start) @ axis / max(axis @ axis, _TINY), 0.0, 1.0))
+        return d, pa, pb, n, s
+
+
+def _segment_pose(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    from taplan.scene.world import _segment_frame
+
+    return _segment_frame(start, end)
+
+
+def _row(JE: np.ndarray, s: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """``n · ((1 − s) J(e0) + s J(e1))``: JE (..., 2, 3, nv), s (...), normal (..., 3) -> (..., nv)."""
+    j0 = np.einsum("...k,...kv->...v", normal, JE[..., 0, :, :])
+    j1 = np.einsum("...k,...kv->...v", normal, JE[..., 1, :, :])
+    return j0 + s[..., None] * (j1 - j0)
+
+
+def _half_extents(shape: Any) -> tuple[float, float, float]:
+    if isinstance(shape, Box):
+        return tuple(0.5 * np.asarray(shape.size))
+    if isinstance(shape, Cylinder):
+        return (shape.radius, shape.radius, 0.5 * shape.length)
+    if isinstance(shape, Capsule):
+        return (0.0, 0.0, 0.5 * shape.length)
+    return (0.0, 0.0, 0.0)
+
+
+def _point_segment(point: np.ndarray, e0: np.ndarray, e1: np.ndarray) -> np.ndarray:
+    """Parameter in [0, 1] of the point of each segment nearest ``point``."""
+    axis = e1 - e0
+    length2 = np.einsum("...k,...k->...", axis, axis)
+    t = np.einsum("...k,...k->...", point - e0, axis) / np.maximum(length2, _TINY)
+    return np.clip(np.where(length2 < _TINY, 0.0, t), 0.0, 1.0)
+
+
+def _segment_parameters(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Parameters (s, t) of the closest points of segment pairs (the world's closed form, Ericson 5.1.9)."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a = np.einsum("ij,ij->i", d1, d1)
+    e = np.einsum("ij,ij->i", d2, d2)
+    f = np.einsum("ij,ij->i", d2, r)
+    c = np.einsum("ij,ij->i", d1, r)
+    b = np.einsum("ij,ij->i", d1, d2)
+    eps = 1e-12
+    safe_a, safe_e = np.maximum(a, eps), np.maximum(e, eps)
+    denom = a * e - b * b
+    s = np.where(denom > eps, np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
+    s = np.where(a <= eps, 0.0, s)
+    t = np.where(e <= eps, 0.0, (b * s + f) / safe_e)
+    low, high = t < 0.0, t > 1.0
+    s = np.where(low & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
+    s = np.where(high & (a > eps), np.clip((b - c) / safe_a, 0.0, 1.0), s)
+    t = np.clip(t, 0.0, 1.0)
+    t = np.where(a <= eps, np.where(e <= eps, 0.0, np.clip(f / safe_e, 0.0, 1.0)), t)
+    s = np.where((e <= eps) & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
+    return s, t
+
+
+def segment_box(e0: np.ndarray, e1: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (M, 3) against centred boxes of half extents (M, 3): the parameter of the segment's point nearest
+    its box and the box's nearest point (M, 3). The squared distance is a convex quadratic between the parameters
+    where the segment crosses a face plane; each piece is minimised exactly."""
+    u = e1 - e0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        crossings = np.concatenate([(half - e0) / u, (-half - e0) / u], axis=1)
+    crossings = np.where(np.isfinite(crossings), np.clip(crossings, 0.0, 1.0), 0.0)
+    M = len(e0)
+    knots = np.sort(np.concatenate([np.zeros((M, 1)), crossings, np.ones((M, 1))], axis=1), axis=1)
+    lo, hi = knots[:, :-1], knots[:, 1:]
+    middle = e0[:, None] + ((lo + hi) / 2)[..., None] * u[:, None]
+    h = half[:, None]
+    side = np.where(middle > h, 1.0, np.where(middle < -h, -1.0, 0.0))  # which face plane each axis is beyond
+    c = side * e0[:, None] - np.abs(side) * h  # the excess beyond it: c + t g on the piece
+    g = side * u[:, None]
+    A = np.einsum("mpk,mpk->mp", g, g)
+    Bc = np.einsum("mpk,mpk->mp", c, g)
+    t = np.clip(np.where(A > _TINY, -Bc / np.maximum(A, _TINY), lo), lo, hi)
+    excess = c + t[..., None] * g
+    squared = np.einsum("mpk,mpk->mp", excess, excess)
+    best = np.argmin(squared, axis=1)
+    s = t[np.arange(M), best]
+    point = e0 + s[:, None] * u
+    return s, np.clip(point, -half, half)
+
+
+def _cylinder_nearest(point: np.ndarray, radius: np.ndarray, half_length: np.ndarray) -> np.ndarray:
+    """The solid cylinder's point nearest each point (..., 3) (the point itself inside)."""
+    rho = np.hypot(point[..., 0], point[..., 1])
+    scale = np.where(rho > radius, radius / np.maximum(rho, _TINY), 1.0)
+    out = point * scale[..., None]
+    out[..., 2] = np.clip(point[..., 2], -half_length, half_length)
+    return out
+
+
+def segment_cylinder(e0: np.ndarray, e1: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (M, 3) against centred solid cylinders along z (``size`` (M, 3): radius, radius, half length):
+    golden-section search of the (convex) point-to-cylinder distance along the segment."""
+    radius, half_length = size[:, 0], size[:, 2]
+    u = e1 - e0
+    x0, y0, z0 = e0.T
+    ux, uy, uz = u.T
+
+    def distance(t: np.ndarray) -> np.ndarray:  # lean: called GOLDEN_ITERATIONS times
+        radial = np.maximum(np.hypot(x0 + t * ux, y0 + t * uy) - radius, 0.0)
+        axial = np.maximum(np.abs(z0 + t * uz) - half_length, 0.0)
+        return np.hypot(radial, axial)
+
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = np.zeros(len(e0)), np.ones(len(e0))
+    x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
+    f1, f2 = distance(x1), distance(x2)
+    for _ in range(GOLDEN_ITERATIONS):
+        left = f1 <= f2  # the minimum lies in [a, x2]: x1 becomes the new x2; else in [x1, b]
+        b = np.where(left, x2, b)
+        a = np.where(left, a, x1)
+        x_new = np.where(left, b - ratio * (b - a), a + ratio * (b - a))
+        f_new = distance(x_new)
+        x1, x2 = np.where(left, x_new, x2), np.where(left, x1, x_new)
+        f1, f2 = np.where(left, f_new, f2), np.where(left, f1, f_new)
+    candidates = np.stack([np.zeros(len(e0)), (a + b) / 2, np.ones(len(e0))], axis=1)
+    values = np.stack([distance(candidates[:, k]) for k in range(3)], axis=1)
+    s = candidates[np.arange(len(e0)), np.argmin(values, axis=1)]
+    point = e0 + s[:, None] * u
+    return s, _cylinder_nearest(point, radius, half_length)
+
+
+def _segment_capsule(e0: np.ndarray, e1: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segments against the z-axis core segments of half length ``size[:, 2]`` (capsules; spheres have 0)."""
+    top = np.zeros_like(e0)
+    top[:, 2] = size[:, 2]
+    s, t = _segment_parameters(e0, e1, -top, top)
+    return s, -top + t[:, None] * 2 * top
+
+
+def _segment_halfspace(e0: np.ndarray, e1: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lower end point (z) is the nearest to the plane z = 0."""
+    s = np.where(e1[:, 2] < e0[:, 2], 1.0, 0.0)
+    point = e0 + s[:, None] * (e1 - e0)
+    return s, point * [1.0, 1.0, 0.0]
+
+
+_BOX, _SPHERE, _CAPSULE, _CYLINDER, _HALF = range(5)
+_KINDS = {Box: _BOX, Sphere: _SPHERE, Capsule: _CAPSULE, Cylinder: _CYLINDER, HalfSpace: _HALF}
+_SOLVERS = {
+    _BOX: segment_box,
+    _SPHERE: _segment_capsule,
+    _CAPSULE: _segment_capsule,
+    _CYLINDER: segment_cylinder,
+    _HALF: _segment_halfspace,
+}
+
+
+class _Kinematics:
+    """Body segment end points and their Jacobians for N configurations: a compiled CasADi function per
+    configuration when a C compiler is available, else pinocchio."""
+
+    def __init__(self, world: CollisionWorld) -> None:
+        self.world = world
+        self.model = world.model
+        self.nv = world.model.nv
+        self.B = len(world.bodies)
+        self.native = _native_kernel(world)
+
+    def __call__(self, Q: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        N, B, nv = len(Q), self.B, self.nv
+        if self.native is not None:
+            function, q_in, e_out, j_out = self.native
+            E = np.empty((N, B * 6))
+            JE = np.empty((N, nv, B * 6)) if jacobian else None
+            for n in range(N):
+                q_in[:] = Q[n]
+                function()
+                E[n] = e_out
+                if JE is not None:
+                    JE[n] = j_out.reshape(nv, B * 6)
+            ends = E.reshape(N, B, 2, 3)
+            rows = None if JE is None else JE.reshape(N, nv, B, 2, 3).transpose(0, 2, 3, 4, 1)
+            return ends, rows
+        return self._pinocchio(Q, jacobian)
+
+    def _pinocchio(self, Q: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        world, model, data = self.world, self.model, self.world.data
+        N, B, nv = len(Q), self.B, self.nv
+        joints = world._body_joint.tolist()
+        ends = np.empty((N, B, 2, 3))
+        rows = np.zeros((N, B, 2, 3, nv)) if jacobian else None
+        for n, q in enumerate(Q):
+            if jacobian:
+                pin.computeJointJacobians(model, data, q)
+            else:
+                pin.forwardKinematics(model, data, q)
+            R = np.array([data.oMi[j].rotation for j in joints]).reshape(B, 3, 3)
+            o = np.array([data.oMi[j].translation for j in joints]).reshape(B, 3)
+            ends[n, :, 0] = np.einsum("bij,bj->bi", R, world._body_start) + o
+            ends[n, :, 1] = np.einsum("bij,bj->bi", R, world._body_end) + o
+            if rows is not None:
+                J = data.J  # WORLD frame: a point's velocity is v + ω × p
+                for k in range(2):
+                    p = ends[n, :, k]  # (B, 3)
+                    skew = np.zeros((B, 3, 3))
+                    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -p[:, 2], p[:, 1], -p[:, 0]
+                    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = p[:, 2], -p[:, 1], p[:, 0]
+                    # v + ω × p = J_v − [p]× J_ω
+                    rows[n, :, k] = (J[None, :3] - np.einsum("bij,jv->biv", skew, J[3:])) * world._support[
+                        world._body_joint
+                    ][:, None, :]
+        return ends, rows
+
+
+_kernels: dict[str, Any] = {}
+
+
+def _native_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The compiled end point kernel of the world's bodies (cached per body set), or None (numpy path)."""
+    try:
+        import casadi as ca
+
+        from taplan.ik._kernel_math import joint_axes
+        from taplan.ik._native import compile_function, native_enabled
+    except ImportError:  # pragma: no cover - casadi is a dependency
+        return None
+    if not native_enabled():
+        return None
+    model = world.model
+    axes = joint_axes(model)
+    if axes is None:
+        return None
+    key = repr(
+        (
+            model.name,
+            model.nq,
+            [(b.joint, np.round(b.start, 12).tolist(), np.round(b.end, 12).tolist()) for b in world.bodies],
+        )
+    )
+    if key not in _kernels:
+        _kernels[key] = _build_kernel(world, axes, ca)
+    function = _kernels[key]
+    if function is None:
+        return None
+    B, nv = len(world.bodies), model.nv
+    q_in, e_out, j_out = np.zeros(model.nq), np.zeros(6 * B), np.zeros(6 * B * nv)
+    native = compile_function(function, [q_in], [e_out, j_out])
+    if native is None:
+        return None
+    # the generated chain must agree with pinocchio before it is trusted
+    reference = _Kinematics.__new__(_Kinematics)
+    reference.world, reference.model, reference.nv, reference.B = world, model, nv, B
+    rng = np.random.default_rng(0)
+    Q = rng.uniform(-2.0, 2.0, (2, model.nq))
+    ends, rows = reference._pinocchio(Q, True)
+    for n in range(2):
+        q_in[:] = Q[n]
+        native()
+        assert rows is not None
+        got = j_out.reshape(nv, B, 2, 3).transpose(1, 2, 3, 0)
+        if not (np.abs(e_out.reshape(B, 2, 3) - ends[n]).max() < 1e-9 and np.abs(got - rows[n]).max() < 1e-9):
+            return None
+    return native, q_in, e_out, j_out
+
+
+def _build_kernel(world: CollisionWorld, axes: list, ca: Any) -> Any:
+    """The CasADi function ``q -> (end points (6B), their Jacobians (6B, nv))`` of the world's bodies."""
+    model = world.model
+    q = ca.SX.sym("q", model.nq)
+    rotations, origins = [ca.SX.eye(3)], [ca.SX.zeros(3)]
+    world_axes: list[Any] = [None]
+    for i in range(1, model.njoints):
+        kind, axis = axes[i - 1]
+        placement, parent = model.jointPlacements[i], model.parents[i]
+        R = ca.mtimes(rotations[parent], ca.DM(placement.rotation))
+        p = origins[parent] + ca.mtimes(rotations[parent], ca.DM(placement.translation))
+        qi = q[model.joints[i].idx_q]
+        if kind == "revolute":
+            K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+            rotations.append(ca.mtimes(R, ca.DM(np.eye(3)) + ca.sin(qi) * ca.DM(K) + (1.0 - ca.cos(qi)) * ca.DM(K @ K)))
+            origins.append(p)
+        else:
+            rotations.append(R)
+            origins.append(p + qi * ca.mtimes(R, ca.DM(axis)))
+        world_axes.append(ca.mtimes(R, ca.DM(axis)))
+    points = []
+    for b in world.bodies:
+        for local in (b.start, b.end):
+            points.append((b.joint, origins[b.joint] + ca.mtimes(rotations[b.joint], ca.DM(np.asarray(local)))))
+    E = ca.vertcat(*[p for _, p in points])
+    J = ca.SX.zeros(3 * len(points), model.nv)
+    for r, (joint, p) in enumerate(points):
+        if joint == 0:
+            continue
+        for k in model.supports[joint]:
+            if k == 0:
+                continue
+            col = model.joints[k].idx_v
+            column = ca.cross(world_axes[k], p - origins[k]) if axes[k - 1][0] == "revolute" else world_axes[k]
+            J[3 * r : 3 * r + 3, col] = column
+    return ca.Function("taplan_body_points", [q], [E, J])

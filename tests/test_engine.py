@@ -1,0 +1,157 @@
+"""taplan.scene.engine: batched distances equal to the coal reference (CollisionWorld with engine=False) to 1e-9 m,
+Jacobians equal to the reference and to finite differences, both kinematics paths, the world's batch entry points."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.scene import Box, Capsule, CollisionWorld, Cylinder, HalfSpace, Scene, Sphere
+from taplan.scene.engine import DistanceEngine, _Kinematics, segment_box, segment_cylinder
+
+DIST_TOL = 1e-9  # [m] engine vs coal (GJK/EPA tolerance tightened to 1e-12)
+JAC_TOL = 1e-9  # [m/rad] where the witness points are unique
+CYLINDER_JAC_TOL = 1e-5  # [m/rad] the golden-section witness on a cylinder is exact in distance, ~1e-6 in place
+FD_TOL = 1e-5  # [m/rad] engine Jacobian vs central differences of the engine's own distances
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _quaternion(rng: np.random.Generator) -> list[float]:
+    q = rng.normal(size=4)
+    return (q / np.linalg.norm(q)).tolist()
+
+
+def _scene(seed: int) -> Scene:
+    """Every closed-form shape, rotated, in the arms' reach (many configurations penetrate some of them)."""
+    rng = np.random.default_rng(seed)
+    scene = Scene()
+    scene.add("floor", HalfSpace(), ([0.0, 0.0, -0.9], [0, 0, 0, 1]))
+    for k in range(4):
+        xyz = rng.uniform([0.2, -0.5, -0.6], [0.6, 0.5, 0.1]).tolist()
+        scene.add(f"box{k}", Box(tuple(rng.uniform(0.03, 0.3, 3))), (xyz, _quaternion(rng)))
+    scene.add("ball", Sphere(0.07), ([0.35, 0.2, -0.3], [0, 0, 0, 1]))
+    scene.add("stick", Capsule(0.04, 0.3), ([0.35, -0.25, -0.3], _quaternion(rng)))
+    scene.add("pole", Cylinder(0.03, 0.6), ([0.4, 0.05, -0.3], _quaternion(rng)))
+    scene.add("drum", Cylinder(0.12, 0.1), ([0.3, -0.1, -0.45], _quaternion(rng)))
+    return scene
+
+
+def _reference(robot: taplan.Robot, scene: Scene) -> CollisionWorld:
+    world = CollisionWorld(robot, scene, engine=False)
+    world._request.gjk_tolerance = 1e-12  # coal's default 1e-6 is the error of its cylinders, not the engine's
+    world._request.epa_tolerance = 1e-12
+    return world
+
+
+def _configurations(robot: taplan.Robot, count: int, seed: int) -> np.ndarray:
+    limits = robot.planning_limits
+    rng = np.random.default_rng(seed)
+    return limits.lower + rng.uniform(0, 1, (count, robot.nq)) * (limits.upper - limits.lower)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_batch_equals_the_coal_reference(robot: taplan.Robot, seed: int) -> None:
+    scene = _scene(seed)
+    world, reference = CollisionWorld(robot, scene), _reference(robot, scene)
+    Q = _configurations(robot, 60, seed)
+    batch = world.engine().evaluate(Q)
+    column = {pair: k for k, pair in enumerate(batch.pairs)}
+    cylinders = {"pole", "drum"}
+    penetrating = compared = 0
+    for n, q in enumerate(Q):
+        ref = reference.distances(q)
+        assert set(ref.pairs) == set(batch.pairs)  # the same pairs: every robot pair, every moving body vs obstacle
+        k = np.array([column[p] for p in ref.pairs])
+        np.testing.assert_allclose(batch.distance[n, k], ref.distance, rtol=0, atol=DIST_TOL)
+        np.testing.assert_allclose(batch.travel[k], ref.travel, rtol=0, atol=1e-12)
+        clear = ref.distance > 1e-6  # penetrating pairs: coal's EPA witnesses are not unique
+        penetrating += int(np.sum(~clear))
+        for row, pair in zip(np.flatnonzero(clear), np.array(ref.pairs, dtype=object)[clear], strict=True):
+            tolerance = CYLINDER_JAC_TOL if pair[1] in cylinders else JAC_TOL
+            np.testing.assert_allclose(batch.jacobian[n, k[row]], ref.jacobian[row], rtol=0, atol=tolerance)
+            np.testing.assert_allclose(batch.normal[n, k[row]], ref.normal[row], rtol=0, atol=1e-4)
+            compared += 1
+    assert penetrating > 0 and compared > 1000  # both regimes were exercised
+
+
+def test_jacobian_matches_finite_differences(robot: taplan.Robot) -> None:
+    scene = _scene(3)
+    engine = CollisionWorld(robot, scene).engine()
+    Q = _configurations(robot, 8, 3)
+    h = 1e-6
+    batch = engine.evaluate(Q)
+    rng = np.random.default_rng(4)
+    for n, q in enumerate(Q):
+        dq = rng.normal(size=robot.nq)
+        dq /= np.linalg.norm(dq)
+        plus = engine.evaluate((q + h * dq)[None], jacobian=False).distance[0]
+        minus = engine.evaluate((q - h * dq)[None], jacobian=False).distance[0]
+        numeric = (plus - minus) / (2 * h)
+        smooth = batch.distance[n] > 1e-3  # away from contact the distance is differentiable
+        np.testing.assert_allclose((batch.jacobian[n] @ dq)[smooth], numeric[smooth], rtol=0, atol=FD_TOL)
+
+
+def test_native_and_pinocchio_kinematics_agree(robot: taplan.Robot) -> None:
+    world = CollisionWorld(robot, _scene(0))
+    engine = DistanceEngine(world)
+    if engine._kinematics.native is None:
+        pytest.skip("no C compiler: only the pinocchio path exists")
+    Q = _configurations(robot, 5, 7)
+    ends, rows = engine.segments(Q)
+    fallback = _Kinematics.__new__(_Kinematics)
+    fallback.world, fallback.model, fallback.nv, fallback.B = world, world.model, world.model.nv, len(world.bodies)
+    ends_ref, rows_ref = fallback._pinocchio(Q, True)
+    np.testing.assert_allclose(ends, ends_ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rows, rows_ref, rtol=0, atol=1e-12)
+
+
+def test_world_batches_use_the_engine_and_match_single_calls(robot: taplan.Robot) -> None:
+    scene = _scene(2)
+    world, reference = CollisionWorld(robot, scene), _reference(robot, scene)
+    Q = _configurations(robot, 10, 2)
+    for q, got in zip(Q, world.distances_many(Q, cutoff=0.05), strict=True):
+        ref = reference.distances(q, cutoff=0.05)
+        assert got.pairs == ref.pairs  # same order: robot pairs, then obstacle-major
+        np.testing.assert_allclose(got.distance, ref.distance, rtol=0, atol=DIST_TOL)
+    matrix = world.distance_matrix(Q, bound_beyond=0.1)
+    exact = world.distance_matrix(Q)
+    assert np.all(matrix.distance <= exact.distance + 1e-12)  # the bound is a lower bound
+    assert np.any(matrix.distance < exact.distance - 1e-3)  # and is used
+
+
+def test_attached_objects_go_through_the_world(robot: taplan.Robot) -> None:
+    scene = _scene(0)
+    scene.attach("tool", Cylinder(0.03, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    Q = _configurations(robot, 3, 9)
+    matrix = world.distance_matrix(Q)
+    assert any(pair[0] == "tool" for pair in matrix.pairs)
+    for n, q in enumerate(Q):
+        single = world.distances(q, jacobian=False)
+        column = {pair: k for k, pair in enumerate(matrix.pairs)}
+        np.testing.assert_allclose(matrix.distance[n, [column[p] for p in single.pairs]], single.distance, atol=1e-12)
+
+
+def test_segment_box_and_cylinder_against_dense_sampling() -> None:
+    rng = np.random.default_rng(5)
+    M = 200
+    e0, e1 = rng.uniform(-0.5, 0.5, (M, 3)), rng.uniform(-0.5, 0.5, (M, 3))
+    half = rng.uniform(0.02, 0.2, (M, 3))
+    t = np.linspace(0.0, 1.0, 20001)
+    points = e0[:, None] + t[None, :, None] * (e1 - e0)[:, None]
+    s, near = segment_box(e0, e1, half)
+    box_dense = np.linalg.norm(np.maximum(np.abs(points) - half[:, None], 0.0), axis=2).min(axis=1)
+    box_exact = np.linalg.norm(e0 + s[:, None] * (e1 - e0) - near, axis=1)
+    assert np.all(box_exact <= box_dense + 1e-12) and np.all(box_dense - box_exact < 1e-4)
+    size = np.column_stack([half[:, 0], half[:, 0], half[:, 2]])
+    s, near = segment_cylinder(e0, e1, size)
+    radial = np.maximum(np.hypot(points[..., 0], points[..., 1]) - size[:, None, 0], 0.0)
+    axial = np.maximum(np.abs(points[..., 2]) - size[:, None, 2], 0.0)
+    cylinder_dense = np.hypot(radial, axial).min(axis=1)
+    cylinder_exact = np.linalg.norm(e0 + s[:, None] * (e1 - e0) - near, axis=1)
+    assert np.all(cylinder_exact <= cylinder_dense + 1e-10) and np.all(cylinder_dense - cylinder_exact < 1e-4)
