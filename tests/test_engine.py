@@ -127,14 +127,19 @@ def test_world_batches_use_the_engine_and_match_single_calls(robot: taplan.Robot
 def test_attached_objects_go_through_the_world(robot: taplan.Robot) -> None:
     scene = _scene(0)
     scene.attach("tool", Cylinder(0.03, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
-    world = CollisionWorld(robot, scene)
+    world, reference = CollisionWorld(robot, scene), _reference(robot, scene)
+    world._request.gjk_tolerance = world._request.epa_tolerance = 1e-12  # both use coal for the attached pairs
     Q = _configurations(robot, 3, 9)
     matrix = world.distance_matrix(Q)
     assert any(pair[0] == "tool" for pair in matrix.pairs)
+    column = {pair: k for k, pair in enumerate(matrix.pairs)}
     for n, q in enumerate(Q):
-        single = world.distances(q, jacobian=False)
-        column = {pair: k for k, pair in enumerate(matrix.pairs)}
-        np.testing.assert_allclose(matrix.distance[n, [column[p] for p in single.pairs]], single.distance, atol=1e-12)
+        single = reference.distances(q, jacobian=False)
+        assert set(single.pairs) == set(matrix.pairs)
+        got = matrix.distance[n, [column[p] for p in single.pairs]]
+        np.testing.assert_allclose(got, single.distance, rtol=0, atol=DIST_TOL)
+    bounded = world.distance_matrix(Q, bound_beyond=0.05)
+    assert np.all(bounded.distance <= matrix.distance + 1e-12)  # the attached pairs' gaps are lower bounds too
 
 
 def test_segment_box_and_cylinder_against_dense_sampling() -> None:

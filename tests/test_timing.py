@@ -268,3 +268,32 @@ def test_jerk_limited_within_5_percent_of_topp_on_10_waypoints(arm_limits: tapla
     np.testing.assert_allclose(result.trajectory(0.0), q[0], atol=1e-12)
     np.testing.assert_allclose(result.trajectory(result.trajectory.duration), q[-1], atol=1e-9)
     assert np.max(_closest_distances(result.trajectory, q[1:-1])) <= result.deviation + 1e-4 <= 0.05 + 1e-4
+
+
+def test_position_range_of_high_degree_pieces_is_exact() -> None:
+    """The batched companion-matrix roots find every interior extreme (checked against dense sampling), also for
+    pieces whose leading coefficients vanish."""
+    from types import SimpleNamespace
+
+    from taplan.timing._polynomial import _position_range_roots
+
+    rng = np.random.default_rng(0)
+    for trial in range(12):
+        m, d, n = int(rng.integers(1, 6)), int(rng.integers(5, 9)), int(rng.integers(1, 6))
+        c = rng.normal(size=(m, d, n))
+        if trial % 3 == 0:
+            c[:, -1, :] = 0.0
+        if trial % 4 == 0:
+            c[:, 3:, 0] = 0.0
+        h = rng.uniform(0.1, 1.0, m)
+        low, high = _position_range_roots(SimpleNamespace(coefficients=c, times=np.concatenate([[0.0], np.cumsum(h)])))
+        samples = np.concatenate(
+            [
+                np.stack(
+                    [np.polynomial.polynomial.polyval(np.linspace(0, h[k], 20001), c[k, :, j]) for j in range(n)], 1
+                )
+                for k in range(m)
+            ]
+        )
+        assert np.all(low <= samples.min(axis=0) + 1e-9) and np.all(high >= samples.max(axis=0) - 1e-9)
+        assert np.all(samples.min(axis=0) - low < 1e-5) and np.all(high - samples.max(axis=0) < 1e-5)

@@ -8,6 +8,10 @@ it. Stepping like that certifies a whole segment or trajectory, not only its sam
 Along a timed trajectory ``|Δq_j|`` over ``Δt`` is bounded by ``Δt · max|q̇_j|`` with the exact peak speeds of the
 polynomial pieces in the window, and the distances at both ends of an interval bound it from both sides (the
 interval is halved until the bound holds).
+
+Both certificates work on whole batches (:func:`_certify_batch`): every configuration a level of halving needs, for
+every segment or window at once, is one call of the world's batched distances (:mod:`taplan.scene.engine`), so a
+certificate costs a handful of batched evaluations instead of one distance query per point.
 """
 
 from __future__ import annotations
@@ -24,13 +28,14 @@ from taplan.scene.world import CollisionWorld
 from taplan.timing._polynomial import max_abs_derivative
 from taplan.trajectory import Trajectory
 
-__all__ = ["SegmentCheck", "check_segment", "verify_trajectory", "Verification"]
+__all__ = ["SegmentCheck", "check_segment", "check_segments", "verify_trajectory", "Verification"]
 
 MIN_CERTIFIED = 1e-4  # [m] below this clearance a step would be too small to certify: report a failure
 LOOKAHEAD = 0.1  # [s] window over which the peak joint speeds bound a trajectory step
 MIN_FRACTION = 1e-9  # a segment interval this short that still cannot be certified is a failure
 MIN_INTERVAL = 1e-6  # [s] a trajectory interval this short that still cannot be certified is a failure
 BOUND_BEYOND = 0.1  # [m] pairs whose bounding spheres are farther apart use that gap (a lower bound): no coal query
+INITIAL_INTERVALS = 4  # a segment's first batch: its ends and this many intervals between them
 
 
 @dataclass(frozen=True)
@@ -51,36 +56,140 @@ def check_segment(
 
     Per pair, the distance changes by at most ``travel_p · |Δq|`` over the segment, so on ``[s_a, s_b]`` it stays
     above ``(d_a + d_b − rate_p (s_b − s_a)) / 2`` with ``rate_p = travel_p · |q_b − q_a|``: intervals are halved
-    until that bound is at least ``margin / 2`` for every pair.
+    until that bound is at least ``margin / 2`` for every pair (:func:`check_segments` with one segment).
     """
-    step = np.abs(q_b - q_a)
-    lowest, lowest_pair = math.inf, ("", "")
-    evaluations = 0
+    return check_segments(world, np.asarray(q_a)[None], np.asarray(q_b)[None], margin, points=points)[0]
+
+
+def check_segments(
+    world: CollisionWorld,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    margin: float,
+    *,
+    points: float | None = None,
+    deadline: float = math.inf,
+) -> list[SegmentCheck]:
+    """:func:`check_segment` for S segments ``starts[k] → ends[k]`` ((S, nq) each) in one batch: every level of
+    halving evaluates the middles of all the intervals not yet certified, of every segment, in one call. A segment
+    stops at its first evaluation closer than ``points``. Past ``deadline`` the unfinished segments are invalid."""
+    starts = np.atleast_2d(np.asarray(starts, dtype=float))
+    ends = np.atleast_2d(np.asarray(ends, dtype=float))
     floor = margin / 2
     required = margin if points is None else max(float(points), floor + MIN_CERTIFIED)
+    delta = ends - starts
+    step = np.abs(delta)
+    grid = np.linspace(0.0, 1.0, INITIAL_INTERVALS + 1)
+    # a segment no robot point moves along needs its first point only
+    moving = world.max_point_speed_bounds(step) > 0.0
 
-    def evaluate(s: float) -> tuple[np.ndarray, np.ndarray, bool]:
-        nonlocal lowest, lowest_pair, evaluations
-        distances = world.distances(q_a + s * (q_b - q_a), jacobian=False, bound_beyond=BOUND_BEYOND)
-        d, pair = distances.closest()
-        evaluations += 1
-        if d < lowest:
-            lowest, lowest_pair = d, pair
-        assert distances.travel is not None
-        return distances.distance, distances.travel @ step, d >= required
+    def configurations(segment: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return starts[segment] + s[:, None] * delta[segment]
 
-    d_a, rate, ok = evaluate(0.0)
-    if not ok:
-        return SegmentCheck(False, lowest, lowest_pair, evaluations)
-    if not np.any(rate > 0):
-        return SegmentCheck(True, lowest, lowest_pair, evaluations)
-    d_b, _, ok = evaluate(1.0)
-    if not ok:
-        return SegmentCheck(False, lowest, lowest_pair, evaluations)
-    valid = _halve_until_certified(
-        (0.0, d_a, 1.0, d_b), evaluate, lambda a, b: rate, lambda lower: bool(np.all(lower >= floor)), MIN_FRACTION
+    outcome = _certify_batch(
+        world,
+        len(starts),
+        [grid if moving[k] else grid[:1] for k in range(len(starts))],
+        configurations,
+        lambda segment, a, b, travel: step[segment] @ travel.T,
+        floor,
+        required,
+        MIN_FRACTION,
+        deadline,
+        strict=False,
     )
-    return SegmentCheck(valid, lowest, lowest_pair, evaluations)
+    return [SegmentCheck(valid, low, pair, count) for valid, low, pair, _, count in outcome]
+
+
+def _certify_batch(
+    world: CollisionWorld,
+    count: int,
+    grids: list[np.ndarray],
+    configurations: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    rate: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    floor: float,
+    required: float,
+    shortest: float,
+    deadline: float,
+    *,
+    strict: bool,
+) -> list[tuple[bool, float, tuple[str, str], float, int]]:
+    """Certify ``count`` curves (segments, trajectories) at once: per curve the intervals between consecutive
+    parameters of its grid, halved level by level until every pair's two-sided bound
+    ``(d_a + d_b − rate (b − a)) / 2`` is at least ``floor`` (> ``floor`` when ``strict``). ``configurations(curve,
+    s)`` gives the configurations at parameters ``s`` of the curves ``curve`` (arrays), ``rate(curve, a, b,
+    travel)`` each interval's per-pair rate (I, P) from the pairs' travel rows (P, nv). A curve fails at an
+    evaluation closer than ``required``, an interval shorter than ``shortest`` that still does not clear, or the
+    ``deadline``. Returns per curve (valid, lowest evaluated clearance, its pair, its parameter, evaluations)."""
+    lowest = np.full(count, np.inf)
+    where = np.zeros(count)
+    pair: list[tuple[str, str]] = [("", "")] * count
+    evaluations = np.zeros(count, dtype=int)
+    valid = np.ones(count, dtype=bool)
+    columns: dict[tuple[str, str], int] = {}
+    travel = np.zeros((0, world.model.nv))
+
+    def evaluate(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Distances (len(s), P) at the parameters; records the lowest per curve and fails curves below required."""
+        nonlocal travel
+        batch = world.distance_matrix(configurations(curve, s), bound_beyond=BOUND_BEYOND)
+        index = np.array([columns.setdefault(p, len(columns)) for p in batch.pairs], dtype=int)
+        if len(columns) > len(travel):
+            travel = np.vstack([travel, np.zeros((len(columns) - len(travel), travel.shape[1]))])
+        travel[index] = batch.travel
+        d = np.full((len(s), len(columns)), np.inf)  # a pair absent at a configuration: nothing there
+        d[:, index] = batch.distance
+        np.add.at(evaluations, curve, 1)
+        if d.shape[1]:
+            k = np.argmin(d, axis=1)
+            low = d[np.arange(len(s)), k]
+            for row in np.flatnonzero(low < lowest[curve]):
+                c = curve[row]
+                if low[row] < lowest[c]:
+                    lowest[c], where[c], pair[c] = low[row], s[row], batch.pairs[np.flatnonzero(index == k[row])[0]]
+            valid[curve[low < required]] = False
+        return d
+
+    curve = np.concatenate([np.full(len(g), k) for k, g in enumerate(grids)])
+    s = np.concatenate(grids)
+    d = evaluate(curve, s)
+    # the intervals between consecutive grid points of the same curve
+    same = curve[:-1] == curve[1:]
+    i_curve, a, b = curve[:-1][same], s[:-1][same], s[1:][same]
+    d_a, d_b = d[:-1][same], d[1:][same]
+    while len(i_curve):
+        keep = valid[i_curve]
+        i_curve, a, b, d_a, d_b = i_curve[keep], a[keep], b[keep], d_a[keep], d_b[keep]
+        if not len(i_curve):
+            break
+        if time.perf_counter() > deadline:
+            valid[i_curve] = False
+            break
+        P = len(columns)
+        d_a, d_b = _pad(d_a, P), _pad(d_b, P)
+        lower = (d_a + d_b - rate(i_curve, a, b, travel) * (b - a)[:, None]) / 2
+        clear = np.all(lower > floor if strict else lower >= floor, axis=1)
+        i_curve, a, b, d_a, d_b = i_curve[~clear], a[~clear], b[~clear], d_a[~clear], d_b[~clear]
+        short = b - a < shortest
+        valid[i_curve[short]] = False
+        i_curve, a, b, d_a, d_b = i_curve[~short], a[~short], b[~short], d_a[~short], d_b[~short]
+        if not len(i_curve):
+            break
+        m = (a + b) / 2
+        d_m = evaluate(i_curve, m)
+        P = len(columns)
+        d_a, d_b = _pad(d_a, P), _pad(d_b, P)
+        i_curve = np.concatenate([i_curve, i_curve])
+        a, b = np.concatenate([a, m]), np.concatenate([m, b])
+        d_a, d_b = np.concatenate([d_a, d_m]), np.concatenate([d_m, d_b])
+    return [(bool(valid[k]), float(lowest[k]), pair[k], float(where[k]), int(evaluations[k])) for k in range(count)]
+
+
+def _pad(d: np.ndarray, columns: int) -> np.ndarray:
+    """Distances of pairs first seen later (a pair absent so far): +inf."""
+    if d.shape[1] == columns:
+        return d
+    return np.hstack([d, np.full((len(d), columns - d.shape[1]), np.inf)])
 
 
 def _halve_until_certified(
@@ -160,45 +269,31 @@ def verify_trajectory(
     speeds[:, index] = max_abs_derivative(trajectory, 1)  # exact peak |q̇| per piece and joint [rad/s]
     times = trajectory.times
     base = robot.home.copy() if hold is None else np.asarray(hold, dtype=float).copy()
-    lowest, pair, when = math.inf, ("", ""), float(times[0])
-    evaluations = 0
 
-    def evaluate(t: float) -> tuple[np.ndarray, np.ndarray, bool]:
-        nonlocal lowest, pair, when, evaluations
-        q = base.copy()
-        q[index] = trajectory(t)
-        distances = world.distances(q, jacobian=False, bound_beyond=BOUND_BEYOND)
-        evaluations += 1
-        d, p = distances.closest()
-        if d < lowest:
-            lowest, pair, when = d, p, t
-        assert distances.travel is not None
-        return distances.distance, distances.travel, d - floor >= MIN_CERTIFIED
+    def configurations(curve: np.ndarray, t: np.ndarray) -> np.ndarray:
+        Q = np.repeat(base[None], len(t), axis=0)
+        Q[:, index] = trajectory(t)
+        return Q
 
-    def peak(t_a: float, t_b: float) -> np.ndarray:
-        lo = max(int(np.searchsorted(times, t_a, side="right")) - 1, 0)
-        hi = int(np.searchsorted(times, t_b, side="left"))
-        return speeds[lo : max(hi, lo + 1)].max(axis=0)
+    def rate(curve: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, travel: np.ndarray) -> np.ndarray:
+        lo = np.maximum(np.searchsorted(times, t_a, side="right") - 1, 0)
+        hi = np.maximum(np.searchsorted(times, t_b, side="left"), lo + 1)
+        peak = np.array([speeds[i:j].max(axis=0) for i, j in zip(lo.tolist(), hi.tolist(), strict=True)])
+        return peak.reshape(len(t_a), robot.nq) @ travel.T
 
     start, end = float(times[0]), float(times[-1])
     grid = np.append(np.arange(start, end, LOOKAHEAD), end)
-    d_a, travel, ok = evaluate(start)
-    if not ok:
-        return Verification(False, lowest, pair, when, evaluations)
-    for t_a, t_b in zip(grid[:-1], grid[1:], strict=True):
-        if time.perf_counter() > deadline:
-            return Verification(False, lowest, pair, when, evaluations, timed_out=True)
-        d_b, _, ok = evaluate(float(t_b))
-        if not ok:
-            return Verification(False, lowest, pair, when, evaluations)
-        certified = _halve_until_certified(
-            (float(t_a), d_a, float(t_b), d_b),
-            evaluate,
-            lambda a, b: travel @ peak(a, b),
-            lambda lower: bool(np.all(lower > floor)),
-            MIN_INTERVAL,
-        )
-        if not certified:
-            return Verification(False, lowest, pair, when, evaluations)
-        d_a = d_b
-    return Verification(True, lowest, pair, when, evaluations)
+    [(valid, lowest, pair, when, evaluations)] = _certify_batch(
+        world,
+        1,
+        [grid],
+        configurations,
+        rate,
+        floor,
+        floor + MIN_CERTIFIED,
+        MIN_INTERVAL,
+        deadline,
+        strict=True,
+    )
+    timed_out = not valid and time.perf_counter() > deadline
+    return Verification(valid, lowest, pair, when, evaluations, timed_out=timed_out)

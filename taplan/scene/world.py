@@ -279,7 +279,7 @@ class CollisionWorld:
             parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
         parts += self._field_distances(starts, ends, cutoff, bound_beyond)
         if self._attached_items():
-            parts.append(self._attached_distances(starts, ends, cutoff))
+            parts.append(self._attached_distances(starts, ends, cutoff, bound_beyond))
         return self._joined(parts, data.J if jacobian else None)
 
     def distances_many(self, configurations: npt.ArrayLike, *, cutoff: float) -> list[Distances]:
@@ -349,8 +349,9 @@ class CollisionWorld:
         if Q.ndim != 2 or Q.shape[1] != self.model.nq:
             raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
         engine = self.engine()
-        if engine is not None and not self._attached_items() and np.all(np.isfinite(Q)):
-            return engine.evaluate(Q, jacobian=False, bound_beyond=bound_beyond)
+        if engine is not None and np.all(np.isfinite(Q)):
+            batch = engine.evaluate(Q, jacobian=False, bound_beyond=bound_beyond)
+            return self._with_attached(batch, Q, bound_beyond) if self._attached_items() else batch
         each = [self.distances(q, jacobian=False, bound_beyond=bound_beyond) for q in Q]
         index: dict[tuple[str, str], int] = {}
         for d in each:
@@ -367,6 +368,37 @@ class CollisionWorld:
             travel[columns] = d.travel
         owners = np.zeros(P, dtype=int)
         return BatchDistances(tuple(index), distance, points, points, points, None, travel, owners, owners)
+
+    def _with_attached(self, batch: Any, Q: np.ndarray, bound_beyond: float) -> Any:
+        """The engine's batch plus the attached objects' pairs (coal, one configuration at a time)."""
+        from taplan.scene.engine import BatchDistances
+
+        model, data = self.model, self.data
+        joints = self._body_joint.tolist()
+        rows = []
+        for q in Q:
+            pin.forwardKinematics(model, data, q)
+            pin.updateFramePlacements(model, data)
+            rotation = np.array([data.oMi[j].rotation for j in joints])
+            origin = np.array([data.oMi[j].translation for j in joints])
+            starts = np.einsum("bij,bj->bi", rotation, self._body_start) + origin
+            ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
+            rows.append(self._attached_distances(starts, ends, math.inf, bound_beyond))
+        names = rows[0].names  # no cutoff: the same pairs in the same order at every configuration
+        N, A = len(Q), len(names)
+        extra = np.array([r.distance for r in rows]).reshape(N, A)
+        points = np.zeros((N, len(batch.pairs) + A, 3))
+        return BatchDistances(
+            batch.pairs + tuple(names),
+            np.hstack([batch.distance, extra]),
+            points,
+            points,
+            points,
+            None,
+            np.vstack([batch.travel, rows[0].travel]),
+            np.concatenate([batch.owner_a, rows[0].owner_a]),
+            np.concatenate([batch.owner_b, rows[0].owner_b]),
+        )
 
     def _from_batch(self, batch: Any, n: int, cutoff: float) -> Distances:
         """Configuration ``n`` of an engine batch as :class:`Distances` (pairs within ``cutoff``, the world's order)."""
@@ -542,8 +574,11 @@ class CollisionWorld:
             )
         return out
 
-    def _attached_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> _Pairs:
-        """Attached objects vs obstacles and vs the robot bodies they may not touch (coal)."""
+    def _attached_distances(
+        self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float = math.inf
+    ) -> _Pairs:
+        """Attached objects vs obstacles and vs the robot bodies they may not touch (coal); pairs whose bounding
+        spheres are more than ``bound_beyond`` apart report that gap (a lower bound) without a coal query."""
         data = self.data
         for att in self._attached_items():
             T = data.oMf[att.frame].homogeneous @ att.pose
@@ -565,9 +600,15 @@ class CollisionWorld:
                 geometry = self._body_geometry[k][0]
                 others.append((b.name, geometry, transforms[k], center, radius, b.joint, False, self._body_reach[k]))
             for name, geometry, transform, center, radius, joint, halfspace, row in others:
-                if not halfspace and np.linalg.norm(center - att.center) - radius - att.radius > cutoff:
+                gap = math.inf if halfspace else float(np.linalg.norm(center - att.center) - radius - att.radius)
+                if gap > cutoff:
                     continue
-                d, pa, pb, n = self._pair(geometry, transform, att.geometry, att.transform)
+                if bound_beyond < gap < math.inf:
+                    away = att.center - center
+                    n = away / max(float(np.linalg.norm(away)), 1e-12)
+                    pa, pb, d = att.center - att.radius * n, center + radius * n, gap
+                else:
+                    d, pa, pb, n = self._pair(geometry, transform, att.geometry, att.transform)
                 if d > cutoff:
                     continue
                 out.add((att.name, name), d, pa, pb, n, parent, joint, att.reach if row is None else att.reach + row)
@@ -628,6 +669,11 @@ class CollisionWorld:
         d, pair = self.distances(self._configuration(q, argument), cutoff=m, jacobian=False).closest()
         if d < m:
             raise CollisionError(argument, pair, -d, m)
+
+    def max_point_speed_bounds(self, steps: npt.ArrayLike) -> np.ndarray:
+        """:meth:`max_point_speed_bound` of several joint steps ``|Δq|`` (S, nq) at once [m] (S,)."""
+        self._refresh()
+        return np.abs(np.asarray(steps, dtype=float)) @ self.reach
 
     def max_point_speed_bound(self, q_a: npt.ArrayLike, q_b: npt.ArrayLike) -> float:
         """An upper bound [m] on how far any point of the robot's bodies (and attached objects) moves between two

@@ -156,14 +156,31 @@ def position_range(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _position_range_roots(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    c = traj.coefficients
-    h = np.diff(traj.times)
-    low, high = np.full(c.shape[2], np.inf), np.full(c.shape[2], -np.inf)
-    for k in range(c.shape[0]):
-        for j in range(c.shape[2]):
-            poly = np.polynomial.Polynomial(c[k, :, j])
-            roots = poly.deriv().roots()
-            real = roots[(np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < h[k])].real
-            values = poly(np.concatenate([[0.0, h[k]], real]))
-            low[j], high[j] = min(low[j], values.min()), max(high[j], values.max())
-    return low, high
+    """Per joint the extremes over the pieces: the ends and the real roots of the derivative inside each piece, from
+    the eigenvalues of the derivatives' companion matrices, batched by degree (one eigvals call per degree instead
+    of one ``Polynomial.roots`` per piece and joint)."""
+    c = traj.coefficients  # (m, d + 1, n), ascending powers
+    m, order, n = c.shape
+    h = np.repeat(np.diff(traj.times), n)  # per polynomial (piece-major, then joint)
+    polys = c.transpose(0, 2, 1).reshape(m * n, order)
+    deriv = polys[:, 1:] * np.arange(1, order)  # (K, d) ascending
+    nonzero = deriv != 0.0
+    degree = np.where(nonzero.any(axis=1), deriv.shape[1] - 1 - np.argmax(nonzero[:, ::-1], axis=1), 0)
+    points = [np.zeros((m * n, 1)), h[:, None]]
+    for D in np.unique(degree[degree >= 1]).tolist():
+        rows = np.flatnonzero(degree == D)
+        a = deriv[rows, : D + 1]
+        companion = np.zeros((len(rows), D, D))
+        companion[:, np.arange(1, D), np.arange(D - 1)] = 1.0
+        companion[:, :, -1] = -a[:, :D] / a[:, D : D + 1]
+        roots = np.linalg.eigvals(companion)
+        inside = (np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < h[rows, None])
+        x = np.zeros((m * n, D))  # a root outside the piece stands in as its start (already a candidate)
+        x[rows] = np.where(inside, roots.real, 0.0)
+        points.append(x)
+    x = np.concatenate(points, axis=1)  # (K, candidates)
+    values = np.zeros_like(x)
+    for i in range(order - 1, -1, -1):
+        values = polys[:, i : i + 1] + x * values
+    values = values.reshape(m, n, -1)
+    return values.min(axis=(0, 2)), values.max(axis=(0, 2))
