@@ -12,7 +12,7 @@ from taplan.scene.engine import DistanceEngine, _Kinematics, segment_box, segmen
 
 DIST_TOL = 1e-9  # [m] engine vs coal (GJK/EPA tolerance tightened to 1e-12)
 JAC_TOL = 1e-9  # [m/rad] where the witness points are unique
-CYLINDER_JAC_TOL = 1e-5  # [m/rad] the golden-section witness on a cylinder is exact in distance, ~1e-6 in place
+CYLINDER_JAC_TOL = 1e-5  # [m/rad] the searched witness on a cylinder is exact in distance, ~1e-6 in place
 FD_TOL = 1e-5  # [m/rad] engine Jacobian vs central differences of the engine's own distances
 
 
