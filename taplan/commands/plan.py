@@ -8,6 +8,10 @@ scene.yaml`` plans collision-free legs between consecutive waypoints around the 
 (:func:`taplan.planning.plan_motion`: certified path, jerk-limited timing, verified; joints missing from FILE hold the
 home pose), stopping at each waypoint; a leg that cannot be planned is an error naming it.
 
+``--scene-from-bag run.mcap`` plans around what the wrist depth cameras saw in a recorded run (the depth images
+and camera infos fused at the recorded joint states, :func:`taplan.ros.bag_perception.perceive_bag`), alone or
+with ``--scene``.
+
 ``--recorded`` (implied for a ``.mcap`` bag) reads FILE as a recorded demonstration: a CSV whose first column is
 the time [s], or a rosbag2 bag's joint_states. It is made limit-respecting and jerk-limited within
 ``--max-deviation`` of the recording (:func:`taplan.timing.time_demonstration`), keeping its timing where the
@@ -38,6 +42,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", help="output trajectory file (default FILE stem + _timed.json)")
     parser.add_argument("--rate", type=float, default=100.0, help="also write a CSV sampled at this rate [Hz]")
     parser.add_argument("--scene", default=None, help="plan collision-free legs around this scene (.yaml/.json)")
+    parser.add_argument(
+        "--scene-from-bag",
+        default=None,
+        help="plan around what the wrist depth cameras saw in this rosbag2 .mcap (with --scene: both)",
+    )
     parser.add_argument("--margin", type=float, default=0.01, help="clearance of the planned path [m] (0.01)")
     parser.add_argument(
         "--recorded", action="store_true", help="FILE is a recorded demonstration (time column; implied for .mcap)"
@@ -64,13 +73,14 @@ def run(args: argparse.Namespace) -> int:
     args.rate = bounded_rate(args.rate, "--rate")
     if args.margin < 0 or not np.isfinite(args.margin):
         raise InvalidInputError("--margin", args.margin, "a clearance >= 0 [m]")
-    default = f"{path.stem}_planned.json" if args.scene is not None else f"{path.stem}_timed.json"
+    in_scene = args.scene is not None or args.scene_from_bag is not None
+    default = f"{path.stem}_planned.json" if in_scene else f"{path.stem}_timed.json"
     output = output_path(Path(args.output) if args.output else path.with_name(default), "--output", suffixes=SUFFIXES)
     if args.recorded or path.suffix.lower() == ".mcap":
         return _plan_recording(args, path, output)
     robot = Robot.teleavatar()
     names, waypoints = load_waypoints(path, robot.joint_names)
-    if args.scene is not None:
+    if args.scene is not None or args.scene_from_bag is not None:
         return _plan_in_scene(args, path, output, names, waypoints, robot)
     limits = (robot.planning_limits if args.limits == "planning" else robot.limits).subset(names)
     if args.method == "topp":
@@ -112,9 +122,21 @@ def _plan_in_scene(
 ) -> int:
     from taplan.errors import PlanningError
     from taplan.planning import plan_motion
-    from taplan.scene import CollisionWorld, load_scene
+    from taplan.scene import CollisionWorld, Scene, load_scene
 
-    world = CollisionWorld(robot, load_scene(args.scene))
+    scene = load_scene(args.scene) if args.scene is not None else Scene()
+    if args.scene_from_bag is not None:
+        from taplan.ros.bag_perception import perceive_bag
+
+        seen = perceive_bag(robot, args.scene_from_bag)
+        perceived = seen.perception.scene.obstacles["perceived"]
+        scene.put("perceived", perceived.shape, perceived.pose)
+        print(
+            f"perceived {len(perceived.shape)} occupied voxels of {seen.perception.grid.resolution * 100:g} cm from "
+            f"{seen.images} depth images and {seen.clouds} point clouds in {args.scene_from_bag}"
+            + (f" (skipped {seen.skipped})" if seen.skipped else "")
+        )
+    world = CollisionWorld(robot, scene)
     configurations = np.repeat(robot.home[None, :], len(waypoints), axis=0)
     configurations[:, robot.indices(names)] = waypoints
     limits = robot.planning_limits if args.limits == "planning" else robot.limits
@@ -139,7 +161,8 @@ def _plan_in_scene(
     trajectory = Trajectory.from_polynomials(np.array(times), coefficients, robot.joint_names)
     trajectory.save(output)
     sampled = trajectory.resample(args.rate).save(output.with_name(f"{output.stem}_{args.rate:g}hz.csv"))
-    report = check(trajectory, limits, name=f"{path.name} in {args.scene}")
+    where = " + ".join(str(s) for s in (args.scene, args.scene_from_bag) if s is not None)
+    report = check(trajectory, limits, name=f"{path.name} in {where}")
     print(report.table())
     print(f"\n{len(waypoints)} waypoints, {len(waypoints) - 1} legs -> {trajectory.duration:.3f} s, collision-free")
     print(f"wrote {output} (exact) and {sampled} ({args.rate:g} Hz samples)")

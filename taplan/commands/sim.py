@@ -2,16 +2,21 @@
 
 Runs the joint-mode model with the FSM rules of the developer guide (no motion without a heartbeat, force pause
 after 1 s without ``/api/fsm/enable`` 1.0, commands validated and clipped, gripper range [0, 1]) until Ctrl-C or
-``--duration``. Rehearse a program end to end with ``taplan sim --loopback`` in one terminal and ``taplan run
---loopback plan.json`` (or your own ROS 2 code on the same ROS_DOMAIN_ID) in another.
+``--duration``. With ``--scene table.yaml --depth`` it also publishes the wrist depth cameras' images of that scene
+(``/{left,right}/depth/image_raw`` 16UC1 and ``camera_info``, rendered through the camera model at
+``--depth-rate``), so perception runs end to end without the robot. Rehearse a program end to end with ``taplan sim
+--loopback`` in one terminal and ``taplan run --loopback plan.json`` (or your own ROS 2 code on the same
+ROS_DOMAIN_ID) in another.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 from taplan.commands._ros_args import add_transport_arguments, open_transport
+from taplan.errors import InvalidInputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,6 +34,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--stall-after", type=float, default=None, help="fault injection: stop joint_states after this many seconds"
     )
+    parser.add_argument("--scene", default=None, help="what the simulated depth cameras see (.yaml/.json)")
+    parser.add_argument("--depth", action="store_true", help="publish wrist depth images of --scene")
+    parser.add_argument("--depth-rate", type=float, default=5.0, help="depth images per camera per second (5)")
+    parser.add_argument(
+        "--depth-size", choices=("quarter", "full"), default="quarter", help="depth image 160x120 (quarter) or 640x480"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,15 +52,20 @@ def run(args: argparse.Namespace) -> int:
         stall_after=args.stall_after,
         motion=args.motion,
     )
+    if args.depth and args.scene is None:
+        raise InvalidInputError("--depth", "no --scene", "a scene file for the cameras to see (--scene FILE)")
     interface, bag = open_transport(args)
     robot = Robot.teleavatar()
     sim = SimulatedRobot(interface, robot, config)
+    cameras = _depth_cameras(args, interface, sim)
     print(f"taplan sim: TeleAvatar on ROS_DOMAIN_ID {interface.domain_id}; Ctrl-C to stop", flush=True)
     start = time.monotonic()
     try:
         while args.duration is None or time.monotonic() - start < args.duration:
             interface.spin_once()
             sim.step()
+            if cameras is not None:
+                cameras.step()
             time.sleep(0.0005)
     except KeyboardInterrupt:
         pass
@@ -60,3 +76,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {bag.path} ({bag.count} messages)")
     print(f"taplan sim: stopped in {sim.fsm.name}; rejected {sim.rejected or 'nothing'}", flush=True)
     return 0
+
+
+def _depth_cameras(args: argparse.Namespace, interface: Any, sim: Any) -> Any:
+    """The simulated wrist depth cameras of ``--scene`` (None without ``--depth``)."""
+    if not args.depth:
+        return None
+    from taplan.ros.sim_depth import SIM_DEPTH_CAMERA, DepthCameraSim
+    from taplan.scene import load_scene
+    from taplan.scene.camera import WRIST_DEPTH_CAMERA
+
+    camera = WRIST_DEPTH_CAMERA if args.depth_size == "full" else SIM_DEPTH_CAMERA
+    return DepthCameraSim(interface, sim, load_scene(args.scene), camera=camera, rate=args.depth_rate)

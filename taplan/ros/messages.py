@@ -3,13 +3,15 @@
 ROS 2 maps a message ``pkg/msg/Name`` to the DDS type ``pkg::msg::dds_::Name_`` and a topic ``/a/b`` to the DDS
 topic ``rt/a/b``; the fields are serialised in CDR in declaration order. The structs below declare the layouts of
 ``builtin_interfaces/Time``, ``std_msgs/Header``, ``sensor_msgs/JointState``, ``geometry_msgs/Pose`` (``Point``,
-``Quaternion``), ``std_msgs/Float32``, ``std_msgs/Int32`` and ``std_msgs/Float32MultiArray`` (``MultiArrayLayout``,
-``MultiArrayDimension``) field for field, so a ROS 2 node (rclpy, rclcpp, ``ros2 topic echo``) and taplan read each
-other's messages.
+``Quaternion``), ``std_msgs/Float32``, ``std_msgs/Int32``, ``std_msgs/Float32MultiArray`` (``MultiArrayLayout``,
+``MultiArrayDimension``) and the depth cameras' ``sensor_msgs/Image``, ``sensor_msgs/CameraInfo``
+(``RegionOfInterest``) and ``sensor_msgs/PointCloud2`` (``PointField``) field for field, so a ROS 2 node (rclpy,
+rclcpp, ``ros2 topic echo``) and taplan read each other's messages.
 
 Messages cross taplan's interfaces as the plain field dicts of :class:`taplan.api.ApiMessage`; a received
-``JointState`` also carries ``"stamp"`` (its header time [s]). This module imports ``cyclonedds``: import it only
-through :mod:`taplan.ros.dds`.
+``JointState``, ``Image``, ``CameraInfo`` or ``PointCloud2`` also carries ``"stamp"`` (its header time [s]), the
+sensor messages also ``"frame_id"``; byte arrays (``uint8[]``) cross as ``bytes``. This module imports
+``cyclonedds``: import it only through :mod:`taplan.ros.dds`.
 """
 
 # no "from __future__ import annotations": cyclonedds evaluates the field annotations of the structs
@@ -19,10 +21,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float32, float64, int32, sequence, uint32
+from cyclonedds.idl.types import array, float32, float64, int32, sequence, uint8, uint32
 
 from taplan.errors import ConfigError
 from taplan.ros.msg_definitions import INT32, MESSAGE_DEFINITIONS
+from taplan.ros.sensor_fields import CAMERA_INFO, IMAGE, POINT_CLOUD2, SENSOR_TYPES, sensor_fields
 
 __all__ = [
     "Time",
@@ -36,6 +39,11 @@ __all__ = [
     "MultiArrayDimension",
     "MultiArrayLayout",
     "Float32MultiArray",
+    "Image",
+    "RegionOfInterest",
+    "CameraInfo",
+    "PointField",
+    "PointCloud2",
     "IDL_TYPES",
     "MESSAGE_DEFINITIONS",
     "dds_topic",
@@ -43,6 +51,11 @@ __all__ = [
     "to_idl",
     "from_idl",
     "INT32",
+    "IMAGE",
+    "CAMERA_INFO",
+    "POINT_CLOUD2",
+    "SENSOR_TYPES",
+    "sensor_fields",
 ]
 
 
@@ -117,12 +130,71 @@ class Float32MultiArray(IdlStruct, typename="std_msgs::msg::dds_::Float32MultiAr
     data: sequence[float32] = field(default_factory=list)
 
 
+@dataclass
+class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
+    header: Header = field(default_factory=Header)
+    height: uint32 = 0
+    width: uint32 = 0
+    encoding: str = ""
+    is_bigendian: uint8 = 0
+    step: uint32 = 0
+    data: sequence[uint8] = field(default_factory=list)  # bytes in, a list of ints out (bytes() in from_idl)
+
+
+@dataclass
+class RegionOfInterest(IdlStruct, typename="sensor_msgs::msg::dds_::RegionOfInterest_"):
+    x_offset: uint32 = 0
+    y_offset: uint32 = 0
+    height: uint32 = 0
+    width: uint32 = 0
+    do_rectify: bool = False
+
+
+@dataclass
+class CameraInfo(IdlStruct, typename="sensor_msgs::msg::dds_::CameraInfo_"):
+    header: Header = field(default_factory=Header)
+    height: uint32 = 0
+    width: uint32 = 0
+    distortion_model: str = ""
+    d: sequence[float64] = field(default_factory=list)
+    k: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
+    r: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
+    p: array[float64, 12] = field(default_factory=lambda: [0.0] * 12)
+    binning_x: uint32 = 0
+    binning_y: uint32 = 0
+    roi: RegionOfInterest = field(default_factory=RegionOfInterest)
+
+
+@dataclass
+class PointField(IdlStruct, typename="sensor_msgs::msg::dds_::PointField_"):
+    name: str = ""
+    offset: uint32 = 0
+    datatype: uint8 = 0
+    count: uint32 = 0
+
+
+@dataclass
+class PointCloud2(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
+    header: Header = field(default_factory=Header)
+    height: uint32 = 0
+    width: uint32 = 0
+    fields: sequence[PointField] = field(default_factory=list)
+    is_bigendian: bool = False
+    point_step: uint32 = 0
+    row_step: uint32 = 0
+    data: sequence[uint8] = field(default_factory=list)
+    is_dense: bool = False
+
+
 IDL_TYPES: dict[str, type] = {
     "sensor_msgs/msg/JointState": JointState,
     "geometry_msgs/msg/Pose": Pose,
     "std_msgs/msg/Float32": Float32,
     INT32: Int32,
     "std_msgs/msg/Float32MultiArray": Float32MultiArray,
+    IMAGE: Image,
+    CAMERA_INFO: CameraInfo,
+    POINT_CLOUD2: PointCloud2,
 }
 
 
@@ -169,7 +241,52 @@ def to_idl(msg_type: str, fields: dict[str, Any], stamp: float = 0.0) -> Any:
     if msg_type == "std_msgs/msg/Float32MultiArray":
         data = [float(v) for v in fields["data"]]
         return Float32MultiArray(layout=MultiArrayLayout(dim=[]), data=data)
+    if msg_type in SENSOR_TYPES:
+        return _sensor_to_idl(msg_type, fields, stamp)
     raise ConfigError(f"unsupported message type {msg_type!r}; supported: {sorted(IDL_TYPES)}")
+
+
+def _sensor_to_idl(msg_type: str, fields: dict[str, Any], stamp: float) -> Any:
+    header = Header(stamp=_stamp(stamp), frame_id=str(fields.get("frame_id", "")))
+    size = {"height": int(fields.get("height", 0)), "width": int(fields.get("width", 0))}
+    if msg_type == IMAGE:
+        return Image(
+            header=header,
+            encoding=str(fields.get("encoding", "")),
+            is_bigendian=int(bool(fields.get("is_bigendian", 0))),
+            step=int(fields.get("step", 0)),
+            data=bytes(fields.get("data", b"")),
+            **size,
+        )
+    if msg_type == CAMERA_INFO:
+        roi = fields.get("roi") or {}
+        return CameraInfo(
+            header=header,
+            distortion_model=str(fields.get("distortion_model", "")),
+            d=[float(v) for v in fields.get("d", [])],
+            k=[float(v) for v in fields.get("k", [0.0] * 9)],
+            r=[float(v) for v in fields.get("r", [0.0] * 9)],
+            p=[float(v) for v in fields.get("p", [0.0] * 12)],
+            binning_x=int(fields.get("binning_x", 0)),
+            binning_y=int(fields.get("binning_y", 0)),
+            roi=RegionOfInterest(
+                **{k: roi[k] for k in ("x_offset", "y_offset", "height", "width", "do_rectify") if k in roi}
+            ),
+            **size,
+        )
+    return PointCloud2(
+        header=header,
+        fields=[
+            PointField(str(f["name"]), int(f["offset"]), int(f["datatype"]), int(f.get("count", 1)))
+            for f in fields.get("fields", [])
+        ],
+        is_bigendian=bool(fields.get("is_bigendian", False)),
+        point_step=int(fields.get("point_step", 0)),
+        row_step=int(fields.get("row_step", 0)),
+        data=bytes(fields.get("data", b"")),
+        is_dense=bool(fields.get("is_dense", False)),
+        **size,
+    )
 
 
 def from_idl(msg_type: str, sample: Any) -> dict[str, Any]:
@@ -190,4 +307,6 @@ def from_idl(msg_type: str, sample: Any) -> dict[str, Any]:
         return {"data": [float(v) for v in sample.data]}
     if msg_type == INT32:
         return {"data": int(sample.data)}
+    if msg_type in SENSOR_TYPES:
+        return sensor_fields(msg_type, sample)
     return {"data": float(sample.data)}

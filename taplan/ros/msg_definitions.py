@@ -26,6 +26,26 @@ MESSAGE_DEFINITIONS: dict[str, str] = {
     ),
     "std_msgs/msg/Float32": "float32 data\n",
     INT32: "int32 data\n",
+    "sensor_msgs/msg/Image": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\n"
+        f"uint8[] data\n{_SEPARATOR}\nMSG: std_msgs/Header\n{_HEADER}\n{_SEPARATOR}\nMSG: builtin_interfaces/Time\n"
+        f"{_TIME}\n"
+    ),
+    "sensor_msgs/msg/CameraInfo": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\nfloat64[9] k\n"
+        "float64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\nRegionOfInterest roi\n"
+        f"{_SEPARATOR}\nMSG: std_msgs/Header\n{_HEADER}\n{_SEPARATOR}\nMSG: builtin_interfaces/Time\n{_TIME}\n"
+        f"{_SEPARATOR}\nMSG: sensor_msgs/RegionOfInterest\nuint32 x_offset\nuint32 y_offset\nuint32 height\n"
+        "uint32 width\nbool do_rectify\n"
+    ),
+    "sensor_msgs/msg/PointCloud2": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nPointField[] fields\nbool is_bigendian\n"
+        "uint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n"
+        f"{_SEPARATOR}\nMSG: std_msgs/Header\n{_HEADER}\n{_SEPARATOR}\nMSG: builtin_interfaces/Time\n{_TIME}\n"
+        f"{_SEPARATOR}\nMSG: sensor_msgs/PointField\nuint8 INT8=1\nuint8 UINT8=2\nuint8 INT16=3\nuint8 UINT16=4\n"
+        "uint8 INT32=5\nuint8 UINT32=6\nuint8 FLOAT32=7\nuint8 FLOAT64=8\nstring name\nuint32 offset\n"
+        "uint8 datatype\nuint32 count\n"
+    ),
     "std_msgs/msg/Float32MultiArray": (
         f"MultiArrayLayout layout\nfloat32[] data\n{_SEPARATOR}\nMSG: std_msgs/MultiArrayLayout\n"
         f"MultiArrayDimension[] dim\nuint32 data_offset\n{_SEPARATOR}\nMSG: std_msgs/MultiArrayDimension\n"

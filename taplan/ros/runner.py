@@ -147,6 +147,9 @@ class Runner:
         config: Rates and thresholds.
         clock: Monotonic time [s]; ``sleep`` waits. Injected for tests.
         on_progress: Called with ``(time [s], duration [s] or None)`` about once per second.
+        monitors: Called every period while moving; one that returns a reason (a string) stops the run smoothly
+            with that reason (e.g. :meth:`taplan.ros.perception_link.PerceptionLink.monitor`: a broken camera
+            stream).
     """
 
     def __init__(
@@ -159,8 +162,10 @@ class Runner:
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
         on_progress: Callable[[float, float | None], None] | None = None,
+        monitors: tuple[Callable[[], str | None], ...] = (),
     ) -> None:
         self.interface: RosInterface = interface
+        self.monitors = tuple(monitors)
         self.robot = robot
         self.config = config or RunnerConfig()
         self.limits = robot.planning_limits if limits is None else limits
@@ -372,6 +377,10 @@ class Runner:
             while True:
                 now = self.clock()
                 self.interface.spin_once()  # type: ignore[attr-defined]
+                for monitor in self.monitors:
+                    why = monitor()
+                    if why:
+                        raise _StopRequestError("stopped", f"{why}: stopping")
                 measured = self.measured()
                 if measured is not None:
                     age, q_meas = measured

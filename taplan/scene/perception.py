@@ -25,6 +25,7 @@ import pinocchio as pin
 from taplan.errors import InvalidInputError
 from taplan.scene.camera import TELEAVATAR_CAMERAS, CameraMount, PinholeCamera, add_camera_frames, depth_to_metres
 from taplan.scene.occupancy import DEFAULT_BOUNDS, DEFAULT_RESOLUTION, Occupancy, OccupancyGrid
+from taplan.scene.pointcloud import cloud_to_points
 from taplan.scene.robot_bodies import robot_bodies
 from taplan.scene.scene import Scene, as_pose
 
@@ -57,6 +58,11 @@ class JointHistory:
         while self._stamps and self._stamps[0] < stamp - self.horizon:
             self._stamps.popleft()
             self._states.popleft()
+
+    @property
+    def latest_stamp(self) -> float:
+        """Stamp of the newest state [s] (-inf when empty)."""
+        return self._stamps[-1] if self._stamps else -math.inf
 
     def at(self, stamp: float) -> np.ndarray:
         """The configuration at ``stamp`` [s], linearly interpolated between the recorded ones."""
@@ -257,6 +263,63 @@ class Perception:
         world = P @ T[:3, :3].T + T[:3, 3]
         kept = self.grid.insert(world, 0.0 if stamp is None else stamp, exclude=self._own_voxels(q_capture))
         return Integration(len(P), kept, 0, T)
+
+    def integrate_image(
+        self,
+        image: dict[str, Any],
+        camera_info: dict[str, Any] | PinholeCamera,
+        *,
+        frame: str | None = None,
+        q: npt.ArrayLike | None = None,
+        stamp: float | None = None,
+    ) -> Integration:
+        """Fuse a ``sensor_msgs/Image`` (its fields: ``height``, ``width``, ``encoding``, ``step``, ``is_bigendian``,
+        ``data``, ``stamp``, ``frame_id``) with its ``CameraInfo``. The camera is ``frame`` (default the image's
+        ``frame_id``), posed at the configuration of ``q`` or, by default, of :attr:`history` at the image's stamp.
+
+        Raises:
+            InvalidInputError: Wrong encoding, a size that differs from the camera info, NaN intrinsics, a data
+                length that does not fit (the message names the field). UnknownNameError: the frame is not the
+                robot's.
+        """
+        camera = camera_info if isinstance(camera_info, PinholeCamera) else PinholeCamera.from_camera_info(camera_info)
+        if not isinstance(image, dict):
+            raise InvalidInputError("image", type(image).__name__, "an Image's fields as a mapping")
+        for name in ("height", "width"):
+            if image.get(name) != getattr(camera, name):
+                raise InvalidInputError(f"image.{name}", image.get(name), f"{getattr(camera, name)} as the camera info")
+        data = image.get("data")
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise InvalidInputError("image.data", type(data).__name__, "bytes")
+        return self.integrate_depth(
+            data,
+            camera,
+            frame=frame if frame is not None else (image.get("frame_id") or None),
+            q=q,
+            stamp=image.get("stamp") if stamp is None and q is None else stamp,
+            encoding=str(image.get("encoding", "")),
+            step=image.get("step"),
+            big_endian=bool(image.get("is_bigendian", False)),
+        )
+
+    def integrate_cloud(
+        self,
+        cloud: dict[str, Any],
+        *,
+        frame: str | None = None,
+        q: npt.ArrayLike | None = None,
+        stamp: float | None = None,
+    ) -> Integration:
+        """Fuse a ``sensor_msgs/PointCloud2`` (its fields, :func:`~taplan.scene.pointcloud.cloud_to_points`), given
+        in ``frame`` (default its ``frame_id``; empty: the root frame) at the configuration of ``q`` or of
+        :attr:`history` at its stamp."""
+        points = cloud_to_points(cloud)
+        frame = frame if frame is not None else (cloud.get("frame_id") or None)
+        if frame is not None:
+            self.robot.frame_id(frame)  # an unknown frame is an error before anything is inserted
+        if q is None and stamp is None:
+            stamp = cloud.get("stamp")
+        return self.integrate_points(points, frame=frame, q=q, stamp=stamp)
 
     def expire(self, now: float) -> int:
         """Drop voxels older than the grid's ``decay`` at time ``now`` [s]."""
