@@ -20,7 +20,7 @@ def demo(tmp_path_factory):
 
 
 def test_every_plan_passes_every_reference_controller(demo):
-    assert [p.name for p in demo.plans] == ["reach", "line", "pick", "scene"]
+    assert [p.name for p in demo.plans] == ["reach", "line", "pick", "scene", "seen"]
     for plan in demo.plans:
         for label, report in plan.reports.items():
             assert report.passed, (plan.name, label, report.failures)
@@ -66,7 +66,7 @@ def test_outputs_are_written(demo):
     names = {p.name for p in demo.files}
     assert {"reach_100hz.csv", "line_100hz.csv", "pick_100hz.csv", "report.json", "scene.html"} <= names
     report = json.loads((demo.out_dir / "report.json").read_text())
-    assert set(report["plans"]) == {"reach", "line", "pick", "scene"}
+    assert set(report["plans"]) == {"reach", "line", "pick", "scene", "seen"}
     reloaded = taplan.Trajectory.load(demo.out_dir / "pick_100hz.csv")
     np.testing.assert_allclose(reloaded.positions[-1], demo.plans[2].trajectory.positions[-1], atol=1e-9)
 
@@ -90,5 +90,21 @@ def test_scene_plan_is_collision_free_and_reaches_across_the_box(demo):
     goal = robot.home.copy()
     goal[7:] = SCENE_REACH_RIGHT
     assert not check_segment(world, robot.home, goal, 0.01).valid  # the straight motion would collide
+    end = robot.frame_pose(plan.trajectory(plan.trajectory.duration), "right_tcp")[:3, 3]
+    np.testing.assert_allclose(end, robot.frame_pose(goal, "right_tcp")[:3, 3], atol=POSE_TOL)
+
+
+def test_seen_plan_avoids_the_true_scene_it_was_perceived_from(demo):
+    from taplan.demo import SCENE_FILE, SCENE_REACH_RIGHT
+    from taplan.planning import verify_trajectory
+    from taplan.scene import CollisionWorld, load_scene
+
+    robot = taplan.Robot.teleavatar()
+    plan = next(p for p in demo.plans if p.name == "seen")
+    truth = CollisionWorld(robot, load_scene(SCENE_FILE))
+    assert verify_trajectory(truth, plan.trajectory, floor=0.0, hold=robot.home).collision_free
+    assert "voxels" in plan.notes[0] and "collision-free" in plan.notes[1]
+    goal = robot.home.copy()
+    goal[7:] = SCENE_REACH_RIGHT
     end = robot.frame_pose(plan.trajectory(plan.trajectory.duration), "right_tcp")[:3, 3]
     np.testing.assert_allclose(end, robot.frame_pose(goal, "right_tcp")[:3, 3], atol=POSE_TOL)

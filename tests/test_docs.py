@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-GUIDES = ("ik.md", "timing.md", "streaming.md", "reference.md", "cli.md", "ros.md", "planning.md")
+GUIDES = ("ik.md", "timing.md", "streaming.md", "reference.md", "cli.md", "ros.md", "planning.md", "perception.md")
 _BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
 
 

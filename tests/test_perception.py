@@ -297,3 +297,21 @@ def test_plans_in_the_perceived_scene_are_free_against_the_true_primitives(robot
         plan = plan_motion(robot, start, goal, world=seen, seed=0)
         times = np.linspace(0, plan.trajectory.duration, 300)
         assert min(truth.min_distance(plan.trajectory(t))[0] for t in times) > 0.0
+
+
+def test_merged_boxes_cover_exactly_the_voxels() -> None:
+    from taplan.scene.occupancy import merge_voxels
+
+    rng = np.random.default_rng(2)
+    blob = np.unique(rng.integers(0, 12, (900, 3)), axis=0)
+    slab = np.stack(np.meshgrid(np.arange(30), np.arange(40), np.arange(3), indexing="ij"), -1).reshape(-1, 3)
+    for voxels in (blob, slab, np.zeros((0, 3), int)):
+        lo, hi = merge_voxels(voxels)
+        cells = [
+            np.stack(np.meshgrid(*[np.arange(a, b) for a, b in zip(low, high, strict=True)], indexing="ij"), -1)
+            for low, high in zip(lo, hi, strict=True)
+        ]
+        covered = np.concatenate([c.reshape(-1, 3) for c in cells] or [np.zeros((0, 3), int)])
+        assert len(covered) == len(voxels)  # no overlap
+        assert set(map(tuple, covered.tolist())) == set(map(tuple, voxels.tolist()))  # same space
+    assert len(merge_voxels(slab)[0]) == 1  # a solid slab is one box

@@ -7,10 +7,14 @@ voxels not seen again for that long are dropped.
 
 :class:`Occupancy` is a snapshot of the map as a scene shape: every occupied voxel is an axis-aligned box of edge
 ``resolution`` in the obstacle's frame. :class:`~taplan.scene.CollisionWorld` asks it for capsule distances
-(:meth:`Occupancy.capsule_distances`): per robot body the exact distance to the nearest voxel box, found through a
-broad phase of 8x8x8-voxel blocks (each block's tight bounding box gives a lower bound and, with its diagonal, an
-upper bound; only blocks below the best upper bound are opened). A segment's distance to a box is found exactly:
-the squared distance is piecewise quadratic in the segment parameter between the (at most six) face crossings.
+(:meth:`Occupancy.capsule_distances`): per robot body the exact distance to the nearest voxel box. The voxels are
+first merged into larger boxes covering exactly the same space (:func:`merge_voxels`: runs along z, then equal runs
+along y, then along x; a table top of 50,000 voxels becomes a handful of boxes), so the distance to the union is
+the smallest distance to a merged box. The boxes are grouped by the 8x8x8-voxel block of their centre for a broad
+phase: each block's tight bounding box gives a lower bound, the exact distance to the block's largest box an upper
+bound, and only blocks whose lower bound is under the best upper bound are opened. A segment's distance to a box is
+found exactly: the squared distance is piecewise quadratic in the segment parameter between the (at most six) face
+crossings.
 """
 
 from __future__ import annotations
@@ -25,7 +29,14 @@ import numpy.typing as npt
 from taplan.errors import InvalidInputError
 from taplan.scene.shapes import Shape
 
-__all__ = ["Occupancy", "OccupancyGrid", "segment_box_distance", "DEFAULT_BOUNDS", "DEFAULT_RESOLUTION"]
+__all__ = [
+    "Occupancy",
+    "OccupancyGrid",
+    "segment_box_distance",
+    "merge_voxels",
+    "DEFAULT_BOUNDS",
+    "DEFAULT_RESOLUTION",
+]
 
 DEFAULT_RESOLUTION = 0.02  # [m]
 # the TeleAvatar's reach in its root frame (shoulder base), with room: x forward, y left, z up [m]
@@ -81,6 +92,37 @@ def segment_box_distance(
     return np.linalg.norm(p - q, axis=1), p, q
 
 
+def _runs(keys: np.ndarray, position: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Group rows sorted by (``keys``, ``position``) into runs of equal keys and consecutive positions; returns the
+    run index of every row."""
+    if not len(position):
+        return np.zeros(0, dtype=np.int64)
+    new = np.ones(len(position), dtype=bool)
+    new[1:] = np.any(keys[1:] != keys[:-1], axis=1) | (start[1:] != end[:-1])
+    return np.cumsum(new) - 1
+
+
+def merge_voxels(voxels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes covering exactly the voxels (N, 3): their low corners and exclusive high corners (M, 3) in voxel
+    indices. Greedy, axis by axis: runs along z, runs of equal z-runs along y, runs of equal yz-rectangles along x."""
+    v = np.asarray(voxels, dtype=np.int64).reshape(-1, 3)
+    if not len(v):
+        return np.zeros((0, 3), np.int64), np.zeros((0, 3), np.int64)
+    lo, hi = v.copy(), v + 1
+    for axis in (2, 1, 0):
+        others = [k for k in range(3) if k != axis]
+        keys = np.column_stack([lo[:, others], hi[:, others]])
+        order = np.lexsort((lo[:, axis], *keys.T[::-1]))
+        lo, hi, keys = lo[order], hi[order], keys[order]
+        run = _runs(keys, lo[:, axis], lo[:, axis], hi[:, axis])
+        first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+        last = np.r_[first[1:], len(run)] - 1
+        new_lo, new_hi = lo[first].copy(), hi[first].copy()
+        new_hi[:, axis] = hi[last, axis]
+        lo, hi = new_lo, new_hi
+    return lo, hi
+
+
 @dataclass(frozen=True, eq=False)
 class Occupancy(Shape):
     """Occupied voxels as an obstacle shape: voxel ``(i, j, k)`` is the box ``origin + [i, i+1) * resolution`` (per
@@ -112,24 +154,42 @@ class Occupancy(Shape):
         self._build_blocks()
 
     def _build_blocks(self) -> None:
-        """Sort the voxels by block and keep each block's voxel range and tight bounding box."""
+        """Merge the voxels into boxes, group the boxes by the block of their centre, and keep per block its box
+        range, tight bounding box and largest box."""
         h = self.resolution
-        block = self.voxels // BLOCK
+        lo_index, hi_index = merge_voxels(self.voxels)
+        block = (lo_index + hi_index) // (2 * BLOCK)
         order = np.lexsort((block[:, 2], block[:, 1], block[:, 0]))
-        voxels = self.voxels[order]
-        block = block[order]
+        lo_index, hi_index, block = lo_index[order], hi_index[order], block[order]
         change = np.flatnonzero(np.any(np.diff(block, axis=0) != 0, axis=1)) + 1 if len(block) else np.zeros(0, int)
         starts = np.concatenate([[0], change]).astype(int) if len(block) else np.zeros(0, int)
-        object.__setattr__(self, "voxels", voxels)
-        lo = self.origin + voxels * h
-        block_lo = np.minimum.reduceat(lo, starts, axis=0) if len(starts) else np.zeros((0, 3))
-        block_hi = np.maximum.reduceat(lo, starts, axis=0) + h if len(starts) else np.zeros((0, 3))
-        object.__setattr__(self, "_lo", lo)
+        box_lo, box_hi = self.origin + lo_index * h, self.origin + hi_index * h
+        counts = np.diff(np.append(starts, len(box_lo))).astype(int)
+        if len(starts):
+            block_lo = np.minimum.reduceat(box_lo, starts, axis=0)
+            block_hi = np.maximum.reduceat(box_hi, starts, axis=0)
+            volume = np.prod(hi_index - lo_index, axis=1)
+            owner = np.repeat(np.arange(len(starts)), counts)
+            # the largest box of each block: its exact distance bounds the block's from above
+            best = np.lexsort((-volume, owner))
+            representative = best[np.r_[0, np.cumsum(counts)[:-1]]]
+        else:
+            block_lo = block_hi = np.zeros((0, 3))
+            representative = np.zeros(0, int)
+        object.__setattr__(self, "_block_centre", (block_lo + block_hi) / 2)
+        object.__setattr__(self, "_block_radius", np.linalg.norm(block_hi - block_lo, axis=1) / 2)
+        object.__setattr__(self, "_lo", self.origin + self.voxels * h)
+        object.__setattr__(self, "_box_lo", box_lo)
+        object.__setattr__(self, "_box_hi", box_hi)
         object.__setattr__(self, "_starts", starts)
-        object.__setattr__(self, "_counts", np.diff(np.append(starts, len(voxels))))
+        object.__setattr__(self, "_counts", counts)
         object.__setattr__(self, "_block_lo", block_lo)
         object.__setattr__(self, "_block_hi", block_hi)
-        object.__setattr__(self, "_block_diagonal", np.linalg.norm(block_hi - block_lo, axis=1))
+        object.__setattr__(self, "_representative", representative)
+
+    def merged_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """The merged boxes ``(lo, hi)`` [m] (M, 3) in the obstacle frame: exactly the occupied space."""
+        return self._box_lo, self._box_hi
 
     def __len__(self) -> int:
         return len(self.voxels)
@@ -188,33 +248,73 @@ class Occupancy(Shape):
         K = len(self._starts)
         if not K or not C:
             return d, pa, pb, n
-        # broad phase: every capsule against every block's tight box
-        ci = np.repeat(np.arange(C), K)
-        ki = np.tile(np.arange(K), C)
-        gap, p, q = segment_box_distance(starts[ci], ends[ci], self._block_lo[ki], self._block_hi[ki])
-        lower = (gap - radii[ci]).reshape(C, K)
-        upper = (gap + self._block_diagonal[ki] - radii[ci]).reshape(C, K)
-        nearest = lower.min(axis=1)
-        threshold = np.minimum(upper.min(axis=1), cutoff)
+        # broad phase 1: bounding spheres of capsules and blocks (a cheap lower bound for every pair), and a first
+        # upper bound per capsule: the exact distance to the largest box of the block nearest its centre
+        centre = (starts + ends) / 2
+        reach = np.linalg.norm(ends - starts, axis=1) / 2 + radii
+        between = np.linalg.norm(centre[:, None, :] - self._block_centre[None, :, :], axis=2)
+        sphere = between - reach[:, None] - self._block_radius[None, :]
+        rep0 = self._representative[np.argmin(between - self._block_radius[None, :], axis=1)]
+        gap0, p0, q0 = segment_box_distance(starts, ends, self._box_lo[rep0], self._box_hi[rep0])
+        threshold = np.minimum(gap0 - radii, cutoff)
+        # broad phase 2: the pairs the spheres cannot rule out, against the blocks' tight boxes (lower bound) and
+        # their largest boxes (upper bound)
+        # (beyond ``bound_beyond`` a lower bound is enough: blocks whose sphere is farther stay unopened, and their
+        # sphere bound caps the answer so it never exceeds the distance to a block left unopened)
+        examine = sphere <= np.minimum(threshold, bound_beyond)[:, None]
+        unopened = np.where(examine, np.inf, sphere).min(axis=1)
+        rows, blocks = np.nonzero(examine)
+        gap, p, q = segment_box_distance(starts[rows], ends[rows], self._block_lo[blocks], self._block_hi[blocks])
+        lower = gap - radii[rows]
+        rep = self._representative[blocks]
+        upper = segment_box_distance(starts[rows], ends[rows], self._box_lo[rep], self._box_hi[rep])[0] - radii[rows]
+        np.minimum.at(threshold, rows, upper)
+        nearest = np.where(np.isin(np.arange(C), rows), np.inf, sphere.min(axis=1))
+        np.minimum.at(nearest, rows, lower)
         bounded = (nearest > threshold) | (nearest > bound_beyond)
         if np.any(bounded):
-            k = np.argmin(lower, axis=1)
-            rows = np.flatnonzero(bounded)
-            flat = rows * K + k[rows]
-            d[rows], pa[rows], pb[rows] = nearest[rows], p[flat], q[flat]
-            n[rows] = _unit(p[flat] - q[flat])
-            pa[rows] -= radii[rows, None] * n[rows]
-        candidate = (lower <= threshold[:, None]) & ~bounded[:, None]
-        rows, blocks = np.nonzero(candidate)
+            # a lower bound; witnesses of the nearest pair examined (or of the first upper bound)
+            order = np.lexsort((lower, rows))
+            head = order[np.r_[True, rows[order][1:] != rows[order][:-1]]] if len(rows) else order
+            best = np.full(C, -1)
+            best[rows[head]] = head
+            out = np.flatnonzero(bounded)
+            d[out] = nearest[out]
+            has = best[out] >= 0
+            pa[out[has]], pb[out[has]] = p[best[out[has]]], q[best[out[has]]]
+            pa[out[~has]], pb[out[~has]] = p0[out[~has]], q0[out[~has]]
+            n[out] = _unit(pa[out] - pb[out])
+            pa[out] -= radii[out, None] * n[out]
+        keep = (lower <= threshold[rows]) & ~bounded[rows]
+        rows, blocks = rows[keep], blocks[keep]
         if not len(rows):
             return d, pa, pb, n
-        # narrow phase: the voxels of the candidate blocks, capsule-major
+        d = self._narrow(starts, ends, radii, rows, blocks, d, pa, pb, n)
+        exact = ~bounded
+        d[exact] = np.minimum(d[exact], unopened[exact])
+        return d, pa, pb, n
+
+    def _narrow(
+        self,
+        starts: np.ndarray,
+        ends: np.ndarray,
+        radii: np.ndarray,
+        rows: np.ndarray,
+        blocks: np.ndarray,
+        d: np.ndarray,
+        pa: np.ndarray,
+        pb: np.ndarray,
+        n: np.ndarray,
+    ) -> np.ndarray:
+        """The exact nearest merged box of each capsule among its candidate ``blocks`` (pairs with ``rows``);
+        fills ``d``, ``pa``, ``pb``, ``n`` of those capsules."""
+        # narrow phase: the merged boxes of the candidate blocks, capsule-major
         counts = self._counts[blocks]
         owner = np.repeat(rows, counts)
         first = np.repeat(self._starts[blocks] - np.cumsum(counts) + counts, counts)
-        voxel = first + np.arange(counts.sum())
-        lo = self._lo[voxel]
-        gap, p, q = segment_box_distance(starts[owner], ends[owner], lo, lo + self.resolution)
+        box = first + np.arange(counts.sum())
+        lo, hi = self._box_lo[box], self._box_hi[box]
+        gap, p, q = segment_box_distance(starts[owner], ends[owner], lo, hi)
         value = gap - radii[owner]
         order = np.lexsort((value, owner))
         head = order[np.concatenate([[True], np.diff(owner[order]) != 0])]
@@ -222,12 +322,12 @@ class Occupancy(Shape):
         d[c] = value[head]
         inside = gap[head] <= 1e-12
         normal = _unit(p[head] - q[head])
-        centre = lo[head] + self.resolution / 2
+        centre = (lo[head] + hi[head]) / 2
         normal[inside] = _unit(p[head][inside] - centre[inside])
         n[c] = normal
         pb[c] = q[head]
         pa[c] = p[head] - radii[c, None] * normal
-        return d, pa, pb, n
+        return d
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -342,18 +442,28 @@ class OccupancyGrid:
             slopes.append(row + col)
         found = []
         kept_pixels = 0
+        offsets = [np.float32((t[k] - self.origin[k]) * inv) for k in range(3)]
+        strides = [np.int32(v) for v in self._strides]
         for layer in range(steps + 1):
             shifted = depth + np.float32(min(layer * self.resolution / 2, thickness)) if layer else depth
-            inside = valid.copy()
-            cells = []
+            # per axis the voxel coordinate (float32, NaN for no measurement: every comparison with it is False)
+            inside = None
+            key = None
             for k in range(3):
                 f = shifted * slopes[k]
-                f += np.float32((t[k] - self.origin[k]) * inv)
-                inside &= (f >= 0) & (f < self.shape[k])
-                cells.append(f)
-            keys = np.zeros(int(np.count_nonzero(inside)), dtype=np.int64)
-            for k in range(3):
-                keys += cells[k][inside].astype(np.int64) * self._strides[k]
+                f += offsets[k]
+                ok = f >= 0
+                ok &= f < self.shape[k]
+                inside = ok if inside is None else inside & ok
+                with np.errstate(invalid="ignore"):  # NaN pixels cast to garbage, masked by `inside`
+                    cell = f.astype(np.int32)
+                if key is None:
+                    key = cell * strides[k]
+                elif k == 1:
+                    key += cell * strides[k]
+                else:
+                    key += cell
+            keys = key[inside].astype(np.int64)
             if not layer:
                 kept_pixels = len(keys)
             found.append(keys)
