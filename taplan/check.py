@@ -275,7 +275,7 @@ def _sparc_columns(
 
 def _sparc_spectrum(f: np.ndarray, mag: np.ndarray, cutoff: float, threshold: float) -> float:
     peak = mag.max()
-    if peak <= 0:
+    if not peak > 0 or not np.isfinite(peak):  # still, or a stream whose speed overflows: no spectrum to measure
         return float("nan")
     mag = mag / peak
     sel = f <= cutoff

@@ -16,6 +16,7 @@ import importlib.util
 import os
 import re
 import sys
+import warnings
 from collections.abc import Sequence
 from typing import NoReturn, TextIO
 
@@ -98,7 +99,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     real_stdout = sys.stdout
     sys.stdout = safe = _PipeSafe(real_stdout)
     try:
-        return _main(argv)
+        with warnings.catch_warnings():  # numpy's overflow notes on absurd inputs: the verdict or error says it
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return _main(argv)
     finally:
         if sys.stdout is safe:
             safe.flush()

@@ -9,7 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from taplan.errors import ConfigError
+from taplan.errors import ConfigError, InvalidInputError
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -25,7 +25,12 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"the benchmarks/ folder is not beside the installed package ({REPO}); run from a checkout")
     if str(REPO) not in sys.path:
         sys.path.insert(0, str(REPO))
-    from benchmarks.__main__ import main
+    from benchmarks.__main__ import available, main
 
+    if args.only is not None:  # checked here, so the error is taplan's one line
+        names = available()
+        unknown = [n for n in args.only.split(",") if n.strip() not in names]
+        if unknown or not args.only.strip():
+            raise InvalidInputError("--only", args.only, f"a comma-separated subset of {', '.join(names)}")
     argv = (["--quick"] if args.quick else []) + (["--only", args.only] if args.only else [])
     return main(argv + (["--report-only"] if args.report_only else []))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from taplan.errors import InvalidInputError
+from taplan.errors import ConfigError, InvalidInputError
 from taplan.io import bounded_rate, load_trajectory, output_path
 from taplan.reference import IndustrialSimulator, JointModeRobot, JointTrajectoryController, Replay
 from taplan.trajectory import Trajectory
@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from taplan.robot import Robot
 
     validate_controller_arguments(args)
+    if not args.file.is_file():  # before its name is used for the default output
+        raise ConfigError(f"file not found: {str(args.file)!r}")
     output = args.output or args.file.with_name(f"{args.file.stem}_{args.controller}_replay.json")
     output = output_path(output, "--output", suffixes=(".json", ".npz", ".csv"))
     robot = Robot.teleavatar()

@@ -12,6 +12,7 @@ ROS_DOMAIN_ID) in another.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from typing import Any
 
@@ -42,13 +43,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run(args: argparse.Namespace) -> int:
-    from taplan.robot import Robot
-    from taplan.ros.sim import SimConfig, SimulatedRobot, check_rate
+MAX_SIM_RATE = 1000.0  # [Hz]
 
+
+def run(args: argparse.Namespace) -> int:
+    from taplan.io import bounded_rate
+    from taplan.robot import Robot
+    from taplan.ros.sim import SimConfig, SimulatedRobot
+
+    for name in ("duration", "stall_after"):
+        value = getattr(args, name)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InvalidInputError(f"--{name.replace('_', '-')}", value, "a time > 0 s")
     config = SimConfig(
-        state_rate=check_rate(args.rate, "--rate"),
-        motion_rate=check_rate(args.motion_rate, "--motion-rate"),
+        # the loop below polls every 0.5 ms: faster streams than 1 kHz could not be kept
+        state_rate=bounded_rate(args.rate, "--rate", high=MAX_SIM_RATE),
+        motion_rate=bounded_rate(args.motion_rate, "--motion-rate", high=MAX_SIM_RATE),
         stall_after=args.stall_after,
         motion=args.motion,
     )

@@ -129,16 +129,16 @@ def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError("scene file", str(path), "an existing .yaml, .yml or .json file")
-    text = path.read_text()
     try:
+        text = path.read_text(encoding="utf-8")
         if path.suffix.lower() == ".json":
             data = json.loads(text) if text.strip() else None
         else:
             import yaml
 
             data = yaml.safe_load(text)
-    except Exception as exc:  # yaml and json raise their own kinds
-        raise InvalidInputError("scene file", str(path), f"valid YAML/JSON ({exc})") from exc
+    except Exception as exc:  # yaml and json raise their own kinds; bytes that are not UTF-8 text
+        raise InvalidInputError("scene file", str(path), f"valid UTF-8 YAML/JSON ({exc})") from exc
     return scene_from_dict(data, str(path))
 
 
