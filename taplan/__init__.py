@@ -32,7 +32,7 @@ logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("api", "ik", "timing", "stream", "reference", "ros", "demo", "plots", "collision")
+_SUBPACKAGES = ("api", "ik", "timing", "stream", "reference", "ros", "demo", "plots")
 
 __all__ = [
     "ArmGroup",

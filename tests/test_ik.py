@@ -21,6 +21,7 @@ from taplan.ik import (
     solve_pose,
 )
 from taplan.ik.limits import capsule_pair_distance
+from taplan.scene.capsules import capsule_distance
 
 FD_STEP = 1e-6  # [rad]
 JAC_TOL = 1e-5  # [m]/[rad] and [rad]/[rad], finite differences vs analytic
@@ -106,7 +107,7 @@ def test_collision_distance_jacobian_matches_finite_differences(robot, rng):
 
         kin.update(q)
         d, grad, pa, pb = capsule_pair_distance(kin, first, second)
-        assert d == pytest.approx(taplan.collision.capsule_distance(kin.data, first, second))
+        assert d == pytest.approx(capsule_distance(kin.data, first, second))
         np.testing.assert_allclose(grad, _fd_jacobian(dist, q)[0], atol=JAC_TOL)
         checked += 1
     assert checked == 9

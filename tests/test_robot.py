@@ -192,7 +192,7 @@ def test_unknown_frame_lists_valid_frames(teleavatar):
 
 
 def test_capsules_cover_both_arms(teleavatar):
-    from taplan.collision import capsule_distance
+    from taplan.scene.capsules import capsule_distance
 
     left = {c.link for c, _ in teleavatar.capsule_pairs("left", "right")}
     right = {c.link for _, c in teleavatar.capsule_pairs("left", "right")}
@@ -204,7 +204,7 @@ def test_capsules_cover_both_arms(teleavatar):
 
 
 def test_segment_distance_closed_form_matches_sampling(rng):
-    from taplan.collision import segment_closest_points
+    from taplan.scene.capsules import segment_closest_points
 
     for _ in range(50):
         p0, p1, q0, q1 = rng.normal(size=(4, 3))

@@ -1,4 +1,4 @@
-"""taplan.timing.cartesian: straight lines through IK, deviation checked independently, limits, errors."""
+"""taplan.planning.cartesian: straight lines through IK, deviation checked independently, limits, errors."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import pytest
 
 import taplan
 from taplan.errors import InfeasibleError, InvalidInputError, TimingError, UnknownNameError
-from taplan.timing import CartesianResult, cartesian_line, cartesian_offset, limit_usage, line_deviation
+from taplan.planning.cartesian import CartesianResult, cartesian_line, cartesian_offset, line_deviation
+from taplan.timing import limit_usage
 
 CHECK_RATE = 1000.0  # [Hz] independent FK sampling of the timed trajectories
 DEVIATION_BOUND = 1e-4  # [m] stated bound for these lines (the default max_deviation is 1 mm)
@@ -177,11 +178,7 @@ def test_zero_motion_raises(teleavatar: taplan.Robot) -> None:
 def test_cartesian_line_respects_a_scene(teleavatar) -> None:
     """With a scene the line is certified collision-free, or refused with the pair and the distance in mm."""
     from taplan.errors import CollisionError, PlanningError
-    from taplan.planning import cartesian_offset as planning_offset
     from taplan.scene import Box, CollisionWorld, Scene
-    from taplan.timing.cartesian import cartesian_offset as compat_offset
-
-    assert planning_offset is compat_offset is cartesian_offset  # the compatibility imports are the same function
     q = teleavatar.home
     hand = teleavatar.frame_pose(q, "right_ee")[:3, 3]
     below = Scene()

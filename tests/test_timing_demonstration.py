@@ -93,7 +93,9 @@ def test_plan_times_a_bag_in_one_command(tmp_path, teleavatar, capsys) -> None:
             for side, part in (("left", qk[:7]), ("right", qk[7:])):
                 fields = {"name": list(api.ARM_JOINT_NAMES[side]), "position": list(part), "stamp": 1000.0 + tk}
                 writer.record(api.Topics.joint_states(side), api.JOINT_STATE, fields, int((1000.0 + tk) * 1e9) + k)
-    times, positions, read_names = load_recording(str(bag))
+    from taplan.ros.bag import read_recording
+
+    times, positions, read_names = read_recording(bag)
     assert read_names == tuple(names) and positions.shape == q.shape
     np.testing.assert_allclose(positions, q, atol=1e-12)
     out = tmp_path / "plan.json"

@@ -100,7 +100,12 @@ def run(args: argparse.Namespace) -> int:
 def _plan_recording(args: argparse.Namespace, path: Path, output: Path) -> int:
     from taplan.timing import load_recording, time_demonstration
 
-    times, positions, names = load_recording(str(path), args.stream)
+    if path.suffix.lower() == ".mcap":
+        from taplan.ros.bag import read_recording
+
+        times, positions, names = read_recording(path, args.stream)
+    else:
+        times, positions, names = load_recording(str(path), args.stream)
     robot = Robot.teleavatar()
     limits = (robot.planning_limits if args.limits == "planning" else robot.limits).subset(names)
     result = time_demonstration(

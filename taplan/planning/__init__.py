@@ -1,5 +1,5 @@
 """Planners that compose the scene, IK and timing: collision-free motion in a scene (:func:`plan_motion`) and
-Cartesian straight lines through IK (:func:`cartesian_line`, also importable from :mod:`taplan.timing`).
+Cartesian straight lines through IK (:func:`cartesian_line`).
 
 Layer order: robot -> scene -> ik / timing / stream -> planning -> trajectory -> reference / check.
 """

@@ -23,7 +23,7 @@ from taplan.reference.replay import JointStateSamples
 from taplan.ros.msg_definitions import FSM_STATE_TOPIC, MESSAGE_DEFINITIONS
 from taplan.ros.sensor_fields import SENSOR_TYPES
 
-__all__ = ["BagWriter", "RecordedRun", "read_run", "read_messages"]
+__all__ = ["BagWriter", "RecordedRun", "read_messages", "read_recording", "read_run"]
 
 
 def _ros_dict(msg_type: str, fields: dict[str, Any], stamp_ns: int) -> dict[str, Any]:
@@ -263,3 +263,15 @@ def read_run(path: str | Path) -> RecordedRun:
     run.heartbeats = np.asarray(beats)
     run.disables = np.asarray(offs)
     return run
+
+
+def read_recording(path: str | Path, stream: str = "measured") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """A bag as a recorded demonstration: ``(times [s] from the first sample, positions [rad] (k, n), joint names)``
+    of its ``"measured"`` (``/{side}_arm/joint_states``) or ``"commanded"`` (``/api/*_arm/joint_cmd``) stream, both
+    arms on the first arm's log times (:meth:`RecordedRun.stream`); the input of
+    :func:`taplan.timing.time_demonstration`, like :func:`taplan.timing.load_recording` for a CSV."""
+    if stream not in ("measured", "commanded"):
+        raise InvalidInputError("stream", stream, "'measured' or 'commanded'")
+    samples = read_run(path).stream(stream)
+    names = tuple(samples.joint_names or ())
+    return samples.times - samples.times[0], np.asarray(samples.positions, dtype=float), names

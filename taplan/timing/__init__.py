@@ -1,20 +1,18 @@
 """Time parameterisation: TOPP-RA retiming that never exceeds the limits, jerk-limited trajectories, casadi
-trajectory optimisation, Cartesian straight lines through IK, and dual-arm synchronisation.
+trajectory optimisation and dual-arm synchronisation (Cartesian straight lines through IK are a planner:
+:mod:`taplan.planning.cartesian`).
 
 Module map: :mod:`~taplan.timing.path` (geometric path ``q(s)``), :mod:`~taplan.timing.constraints` (toppra
 constraint exact on grid segments), :mod:`~taplan.timing.toppra_retime` (``retime``),
 :mod:`~taplan.timing.jerk_limited` (TOPP-RA + moving-average filter of the path
 timing), :mod:`~taplan.timing.sync` (dual-arm time base), :mod:`~taplan.timing.limits_check` (exact peak usage of
-the limits), :mod:`~taplan.planning.cartesian` (straight lines through IK: a
-planner one layer up, still importable from here),
+the limits),
 :mod:`~taplan.timing.straight` (time-optimal jerk-limited straight joint-space segment, ruckig),
 :mod:`~taplan.timing.optimize` (casadi/ipopt minimum-time or minimum-jerk trajectories),
 :mod:`~taplan.timing.demonstration` (recorded demonstrations into jerk-limited trajectories).
 """
 
 from __future__ import annotations
-
-from typing import Any
 
 from taplan.timing.demonstration import DemonstrationResult, Slowdown, load_recording, time_demonstration
 from taplan.timing.jerk_limited import JerkLimitedResult, filter_profile, jerk_limited
@@ -26,10 +24,6 @@ from taplan.timing.sync import split, synchronise
 from taplan.timing.toppra_retime import PathProfile, grid_for, retime, time_optimal_profile
 
 __all__ = [
-    "CartesianResult",
-    "cartesian_line",
-    "cartesian_offset",
-    "line_deviation",
     "DemonstrationResult",
     "JerkLimitedResult",
     "LimitUsage",
@@ -52,15 +46,3 @@ __all__ = [
     "time_optimal_profile",
 ]
 
-
-_MOVED_TO_PLANNING = ("CartesianResult", "cartesian_line", "cartesian_offset", "line_deviation")
-
-
-def __getattr__(name: str) -> Any:
-    # Cartesian lines compose IK, timing and the scene: they live in taplan.planning (a layer above), imported
-    # lazily here so that existing ``from taplan.timing import cartesian_line`` keeps working without a cycle
-    if name in _MOVED_TO_PLANNING:
-        from taplan.planning import cartesian
-
-        return getattr(cartesian, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

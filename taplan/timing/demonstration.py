@@ -329,33 +329,27 @@ _TIME_COLUMNS = ("time", "t", "timestamp", "stamp")
 
 
 def load_recording(path: str, stream: str = "measured") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """``(times [s] from the first sample, positions [rad] (k, n), joint names)`` of a recorded demonstration.
+    """``(times [s] from the first sample, positions [rad] (k, n), joint names)`` of a recorded demonstration CSV.
 
     Args:
         path: A CSV whose header is a time column (``time``, ``t``, ``timestamp`` or ``stamp`` [s]) then one
-            column per joint (``l_joint1`` or ``l_joint1.pos``; other ``.vel``/``.acc`` columns are ignored), or a
-            rosbag2 MCAP file: its ``/{left,right}_arm/joint_states`` topics, read with
-            :func:`taplan.ros.bag.read_run` (both arms on the first arm's log times).
-        stream: For a bag, ``"measured"`` (joint_states) or ``"commanded"`` (``/api/*_arm/joint_cmd``).
+            column per joint (``l_joint1`` or ``l_joint1.pos``; other ``.vel``/``.acc`` columns are ignored). A
+            rosbag2 MCAP bag is read at the ROS edge by :func:`taplan.ros.bag.read_recording` (same return value);
+            ``taplan plan --recorded`` takes either.
+        stream: Unused for a CSV (kept so both readers take the same arguments).
 
     Raises:
-        InvalidInputError: a missing or unreadable file, or no joint columns / streams in it.
+        InvalidInputError: a missing or unreadable file, or no joint columns in it.
     """
     from pathlib import Path as FilePath
 
     file = FilePath(path)
     if not file.is_file():
-        raise InvalidInputError("recording", str(file), "an existing .csv or .mcap file")
+        raise InvalidInputError("recording", str(file), "an existing .csv file")
     if file.suffix.lower() == ".mcap":
-        from taplan.ros.bag import read_run  # the bag reader lives at the ROS edge; imported only for bags
-
-        if stream not in ("measured", "commanded"):
-            raise InvalidInputError("stream", stream, "'measured' or 'commanded'")
-        samples = read_run(file).stream(stream)
-        names = tuple(samples.joint_names or ())
-        return samples.times - samples.times[0], np.asarray(samples.positions, dtype=float), names
+        raise InvalidInputError("recording", str(file), "a .csv (a .mcap bag: taplan.ros.bag.read_recording)")
     if file.suffix.lower() != ".csv":
-        raise InvalidInputError("recording", str(file), "a .csv (time + joint columns) or .mcap (rosbag2) file")
+        raise InvalidInputError("recording", str(file), "a .csv file (a time column, then one per joint)")
     header = [h.strip() for h in file.read_text().splitlines()[0].split(",")] if file.stat().st_size else []
     if not header or header[0].lower() not in _TIME_COLUMNS:
         raise InvalidInputError("recording", f"header {header[:3]}...", f"a first column named one of {_TIME_COLUMNS}")
