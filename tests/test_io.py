@@ -20,7 +20,8 @@ from taplan.io import (
     output_path,
     read_waypoints,
 )
-from taplan.timing import jerk_limited, optimize, retime, straight_line
+from taplan.planning import cartesian_offset
+from taplan.timing import jerk_limited, optimize, retime, straight_line, synchronise, time_demonstration
 from taplan.trajectory import Trajectory
 
 FORMATS = ("json", "csv", "npz")
@@ -42,6 +43,8 @@ def plans(teleavatar) -> dict[str, Trajectory]:  # noqa: ANN001
     q0 = teleavatar.home
     wp = np.array([q0, q0 + 0.2, q0 + np.r_[[0.3, 0.1, -0.2, 0.2, 0.0, 0.1, 0.0] * 2]])
     arm = lim.subset(teleavatar.joint_names[:7])
+    right = lim.subset(teleavatar.joint_names[7:])
+    t_rec = np.linspace(0.0, 2.0, 101)  # a recording at 50 Hz [s]
     t = np.linspace(0.0, 1.0, 5)
     q = q0[None, :] + 0.1 * np.sin(t)[:, None]
     return {
@@ -52,11 +55,24 @@ def plans(teleavatar) -> dict[str, Trajectory]:  # noqa: ANN001
         "linear": Trajectory(t, q, joint_names=teleavatar.joint_names),
         "cubic": Trajectory(t, q, 0.1 * np.cos(t)[:, None] * np.ones(14), joint_names=teleavatar.joint_names),
         "quintic": jerk_limited(wp, lim).trajectory.resample(100.0),
+        "cartesian": cartesian_offset(teleavatar, q0, {"right_ee": [0.0, 0.0, -0.05]}).trajectory,
+        "demonstration": time_demonstration(t_rec, q0[:7] + 0.2 * np.sin(t_rec)[:, None], arm).trajectory,
+        "synchronised": synchronise({"left": wp[:, :7], "right": wp[:, 7:]}, {"left": arm, "right": right})["right"],
+        "random_jerk": jerk_limited(lim.lower + (lim.upper - lim.lower) * _fractions(3), lim).trajectory,
     }
 
 
+def _fractions(rows: int) -> np.ndarray:
+    """Waypoints spread over the limits (their jerk-limited pieces reach degree 11: the file format must carry it)."""
+    return 0.05 + 0.9 * np.random.default_rng(4).random((rows, 14))
+
+
 @pytest.mark.parametrize("fmt", FORMATS)
-@pytest.mark.parametrize("method", ["topp", "jerk", "straight", "optimize", "linear", "cubic", "quintic"])
+@pytest.mark.parametrize(
+    "method",
+    ["topp", "jerk", "straight", "optimize", "linear", "cubic", "quintic", "cartesian", "demonstration", "synchronised",
+     "random_jerk"],
+)  # fmt: skip
 def test_every_method_round_trips_exactly_in_every_format(plans, method: str, fmt: str, tmp_path: Path) -> None:  # noqa: ANN001
     plan = plans[method]
     back = load_trajectory(plan.save(tmp_path / f"p.{fmt}"))

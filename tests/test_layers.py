@@ -14,7 +14,19 @@ from pathlib import Path
 import taplan
 
 LAYERS = (
-    ("errors", "_validation", "limits", "trajectory", "io", "models", "scene.capsules"),
+    # the data, and leaf helpers that import no other taplan module (the compiled-kernel tools live in ik/ but the
+    # scene's distance engine compiles with them too)
+    (
+        "errors",
+        "_validation",
+        "limits",
+        "trajectory",
+        "io",
+        "models",
+        "scene.capsules",
+        "ik._native",
+        "ik._kernel_math",
+    ),
     ("robot",),
     ("scene",),
     ("ik", "timing", "reference", "check", "plots"),
