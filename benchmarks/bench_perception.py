@@ -11,9 +11,10 @@ plan_motion in scenes perceived through the wrist cameras next to the same probl
    peer: coal's capsule-octree distance (``coal.distance`` with an ``OcTree`` of the same voxels) for the same
    bodies, one query per body.
 3. **Planning**: the seeded problems of ``benchmarks/_scenes.py``; each scene is perceived from the wrist cameras
-   (:func:`taplan.scene.scan.perceive`: next-best-view scan poses, 160x120 depth images with noise and missing
-   pixels, 2 cm voxels, surfaces taken 4 cm thick) and planned with ``plan_motion`` in the perceived scene (plus
-   the objects the hands carry, which are known) and in the true scene. Both plans are checked by the same
+   (:func:`taplan.scene.scan.perceive`: 8 next-best-view scan poses per wrist camera chosen among 150 seeded arm
+   poses, 160x120 depth images with noise and missing pixels, 2 cm voxels, surfaces taken 4 cm thick) and
+   planned with ``plan_motion`` in the perceived scene (plus the objects the hands carry, which are known) and in
+   the true scene. Both plans are checked by the same
    independent dense check against the **true** primitives (``benchmarks/_peer.dense_check``).
 
 Run: ``python -m benchmarks.bench_perception [--problems 100] [--quick]``.
@@ -36,13 +37,14 @@ from benchmarks._scenes import make_scene, problems
 from taplan.errors import TaplanError
 from taplan.planning import plan_motion
 from taplan.scene import Box, CollisionWorld, OccupancyGrid, Perception, Scene
-from taplan.scene.camera import WRIST_DEPTH_CAMERA, PinholeCamera, look_at
+from taplan.scene.camera import TELEAVATAR_CAMERAS, WRIST_DEPTH_CAMERA, PinholeCamera, look_at
 from taplan.scene.raycast import render_depth
-from taplan.scene.scan import perceive
+from taplan.scene.scan import perceive, scan_configurations
 
 MAX_TIME = 5.0  # [s] per plan
 SCAN_CAMERA = PinholeCamera(160, 120, 84.25, 84.25, 80.0, 60.0)  # the wrist camera's field of view, 1/4 size
 THICKNESS = 0.04  # [m] surfaces taken as solids this thick
+SCAN_VIEWS, SCAN_SAMPLES = 8, 150  # views per wrist camera, chosen among this many seeded arm poses
 
 
 def _cpu_calls(func: Any, repeats: int, warmup: int) -> dict[str, float]:
@@ -165,7 +167,9 @@ def bench_distance(robot: taplan.Robot, repeats: int) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------------------------- planning
 def _perceived_scene(robot: taplan.Robot, problem: Any) -> tuple[Scene, float]:
     start = time.perf_counter()
-    perception = perceive(robot, problem.scene, camera=SCAN_CAMERA, seed=problem.index, thickness=THICKNESS)
+    probe = Perception(robot, cameras=dict(TELEAVATAR_CAMERAS))
+    views = scan_configurations(probe, problem.scene, count=SCAN_VIEWS, samples=SCAN_SAMPLES, seed=problem.index)
+    perception = perceive(robot, problem.scene, views, camera=SCAN_CAMERA, seed=problem.index, thickness=THICKNESS)
     scene = perception.scene
     for name, item in problem.scene.attached.items():  # what the hands carry is known, not seen
         scene.attach(name, item.shape, item.frame, item.pose)

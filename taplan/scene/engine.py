@@ -72,9 +72,15 @@ class BatchDistances:
 
 
 def supports(world: CollisionWorld) -> bool:
-    """Whether the engine covers the world's scene (obstacles of closed-form shapes; attached objects and other
-    obstacles are evaluated by the world itself)."""
-    return all(isinstance(o.shape, _CLOSED) for o in world.scene.obstacles.values())
+    """Whether the engine covers the world's scene (obstacles of closed-form shapes, and shapes that answer capsule
+    distances themselves such as perceived occupancy; attached objects and other obstacles are evaluated by the world
+    itself)."""
+    return all(isinstance(o.shape, _CLOSED) or _is_field(o.shape) for o in world.scene.obstacles.values())
+
+
+def _is_field(shape: Any) -> bool:
+    """A shape that answers capsule distances itself (:class:`~taplan.scene.occupancy.Occupancy`)."""
+    return hasattr(shape, "capsule_distances")
 
 
 class DistanceEngine:
@@ -118,6 +124,7 @@ class DistanceEngine:
         self.half = np.array([_half_extents(o.shape) for o in obstacles]).reshape(-1, 3)
         self.obstacle_radius = np.array([getattr(o.shape, "radius", 0.0) for o in obstacles])
         self.coal_geometry = [o.shape.to_coal() for o in obstacles]
+        self.fields = [o for o in scene.obstacles.values() if _is_field(o.shape)]
         self._version = scene.version
 
     @property
@@ -125,7 +132,7 @@ class DistanceEngine:
         self._refresh()
         bodies = self.world.bodies
         names = list(self.self_names)
-        names += [(bodies[b].name, o.name) for o in self.obstacles for b in self.movers]
+        names += [(bodies[b].name, o.name) for o in self.obstacles + self.fields for b in self.movers]
         return names
 
     # --------------------------------------------------------------------------------------------- evaluate
@@ -145,18 +152,17 @@ class DistanceEngine:
         parts = [self._self_pairs(E, JE)]
         if obstacles and self.obstacles:
             parts.append(self._obstacle_pairs(E, JE, bound_beyond))
+        if obstacles and self.fields:
+            parts.append(self._field_pairs(E, JE, bound_beyond))
         d = np.concatenate([p[0] for p in parts], axis=1)
         pa = np.concatenate([p[1] for p in parts], axis=1)
         pb = np.concatenate([p[2] for p in parts], axis=1)
         n = np.concatenate([p[3] for p in parts], axis=1)
         J = np.concatenate([p[4] for p in parts], axis=1) if jacobian else None
-        names = self.self_names + (
-            [(self.world.bodies[b].name, o.name) for o in self.obstacles for b in self.movers]
-            if obstacles and self.obstacles
-            else []
-        )
+        others = self.obstacles + self.fields if obstacles else []
+        names = self.self_names + [(self.world.bodies[b].name, o.name) for o in others for b in self.movers]
         reach = self.world._body_reach
-        M = len(self.obstacles) if obstacles else 0
+        M = len(others)
         travel = np.concatenate([reach[self.self_i] + reach[self.self_j], np.tile(reach[self.movers], (M, 1))])
         owner_a = np.concatenate([self.joint[self.self_i], np.tile(self.joint[self.movers], M)])
         owner_b = np.concatenate([self.joint[self.self_j], np.zeros(M * len(self.movers), dtype=int)])
@@ -252,6 +258,40 @@ class DistanceEngine:
             pb.reshape(*flat, 3),
             normal.reshape(*flat, 3),
             (rows.reshape(*flat, -1) if rows is not None else None),
+        )
+
+    def _field_pairs(self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float) -> tuple[np.ndarray, ...]:
+        """Moving bodies vs obstacles that answer capsule distances themselves (occupancy voxels): one call per
+        obstacle for every configuration's bodies at once, obstacle-major (N, F·Bm)."""
+        movers = self.movers
+        N, Bm = len(E), len(movers)
+        radii = np.tile(self.radius[movers], N)
+        out: list[list[np.ndarray]] = [[], [], [], [], []]
+        for o in self.fields:
+            R, c = o.pose[:3, :3], o.pose[:3, 3]
+            e0 = ((E[:, movers, 0] - c) @ R).reshape(-1, 3)
+            e1 = ((E[:, movers, 1] - c) @ R).reshape(-1, 3)
+            d, pa, pb, normal = o.shape.capsule_distances(e0, e1, radii, math.inf, bound_beyond)
+            # the witness's parameter on the body's axis (its point on the axis is pa + r n)
+            axis = e1 - e0
+            length2 = np.einsum("ij,ij->i", axis, axis)
+            on_axis = pa + radii[:, None] * normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.where(length2 > _TINY, np.einsum("ij,ij->i", on_axis - e0, axis) / length2, 0.0)
+            s = np.clip(s, 0.0, 1.0).reshape(N, Bm)
+            normal_root = (normal @ R.T).reshape(N, Bm, 3)
+            out[0].append(d.reshape(N, Bm))
+            out[1].append((pa @ R.T + c).reshape(N, Bm, 3))
+            out[2].append((pb @ R.T + c).reshape(N, Bm, 3))
+            out[3].append(normal_root)
+            if JE is not None:
+                out[4].append(_row(JE[:, movers], s, normal_root))
+        return (
+            np.concatenate(out[0], axis=1),
+            np.concatenate(out[1], axis=1),
+            np.concatenate(out[2], axis=1),
+            np.concatenate(out[3], axis=1),
+            np.concatenate(out[4], axis=1) if JE is not None else None,
         )
 
     def _parameter(self, code: int, pick: np.ndarray) -> np.ndarray:

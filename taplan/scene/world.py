@@ -332,7 +332,7 @@ class CollisionWorld:
         from taplan.scene.engine import DistanceEngine, supports
 
         self._refresh()
-        if not self.use_engine or self._fields or not supports(self):
+        if not self.use_engine or not supports(self):
             return None
         if self._engine is None:
             self._engine = DistanceEngine(self)
@@ -402,7 +402,7 @@ class CollisionWorld:
 
     def _from_batch(self, batch: Any, n: int, cutoff: float) -> Distances:
         """Configuration ``n`` of an engine batch as :class:`Distances` (pairs within ``cutoff``, the world's order)."""
-        keep = np.flatnonzero(batch.distance[n] <= cutoff)
+        keep = np.flatnonzero((batch.distance[n] <= cutoff) & np.isfinite(batch.distance[n]))
         return Distances(
             tuple(batch.pairs[k] for k in keep),
             batch.distance[n, keep],
