@@ -315,3 +315,30 @@ def test_merged_boxes_cover_exactly_the_voxels() -> None:
         assert len(covered) == len(voxels)  # no overlap
         assert set(map(tuple, covered.tolist())) == set(map(tuple, voxels.tolist()))  # same space
     assert len(merge_voxels(slab)[0]) == 1  # a solid slab is one box
+
+
+def test_the_batched_engine_answers_occupancy_like_the_world(robot: taplan.Robot) -> None:
+    """distances_many / distance_matrix (the planner's batches) include the voxels, equal to distances(q)."""
+    rng = np.random.default_rng(0)
+    grid = OccupancyGrid(0.02)
+    grid.insert(rng.uniform([0.2, -0.6, -0.5], [0.9, 0.6, -0.1], (3000, 3)))
+    scene = Scene()
+    scene.add("perceived", grid.snapshot())
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    assert world.engine() is not None
+    limits = robot.planning_limits
+    Q = np.array([limits.lower + rng.uniform(0.1, 0.9, robot.nq) * (limits.upper - limits.lower) for _ in range(20)])
+    for cutoff in (np.inf, 0.05):
+        for q, batch in zip(Q, world.distances_many(Q, cutoff=cutoff), strict=True):
+            single = world.distances(q, cutoff=cutoff)
+            assert single.pairs == batch.pairs
+            np.testing.assert_allclose(batch.distance, single.distance, atol=1e-9)
+            np.testing.assert_allclose(batch.jacobian, single.jacobian, atol=1e-7)
+    matrix = world.distance_matrix(Q)
+    perceived = [k for k, pair in enumerate(matrix.pairs) if pair[1] == "perceived"]
+    assert len(perceived) == len(world._movers)
+    for n, q in enumerate(Q):
+        single = world.distances(q, jacobian=False)
+        by_name = dict(zip(single.pairs, single.distance, strict=True))
+        np.testing.assert_allclose(matrix.distance[n, perceived], [by_name[matrix.pairs[k]] for k in perceived])
