@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from taplan.commands._ros_args import add_transport_arguments, open_transport
 
@@ -30,6 +31,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait", type=float, default=5.0, help="wait this long for the first joint states [s]")
     parser.add_argument("--disable", action="store_true", help="send /api/fsm/enable -1 at the end (robot pauses)")
     parser.add_argument("--record", type=Path, default=None, help="write sent and measured streams (.npz)")
+    parser.add_argument(
+        "--cameras",
+        action="store_true",
+        help="fuse the wrist depth cameras (recorded with --bag); stop smoothly when their images stop",
+    )
+    parser.add_argument("--camera-timeout", type=float, default=1.0, help="--cameras: stale after this long [s]")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,7 +67,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  t = {t:6.1f} s", flush=True)
 
     try:
-        runner = Runner(interface, robot, config=config, on_progress=progress)
+        runner = Runner(
+            interface, robot, config=config, on_progress=progress, monitors=_camera_monitors(args, interface, robot)
+        )
         print(f"taplan run: waiting for joint states on ROS_DOMAIN_ID {interface.domain_id}", flush=True)
         if trajectory is not None:
             print(f"taplan run: executing {args.file} ({trajectory.duration:.2f} s) at {args.rate:g} Hz", flush=True)
@@ -105,3 +114,15 @@ def _stream_targets(runner, robot, args: argparse.Namespace):  # noqa: ANN001, A
     if feed.skipped:
         print(f"taplan run: skipped {feed.skipped} target line(s)", flush=True)
     return result
+
+
+def _camera_monitors(args: argparse.Namespace, interface: Any, robot: Any) -> tuple:
+    """With ``--cameras``: a PerceptionLink on the interface (its images are recorded with ``--bag``) whose stale
+    stream stops the run."""
+    if not args.cameras:
+        return ()
+    from taplan.ros.perception_link import PerceptionLink
+    from taplan.scene import Perception
+
+    link = PerceptionLink(interface, Perception(robot), stale_after=args.camera_timeout)
+    return (link.monitor,)

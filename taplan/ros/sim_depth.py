@@ -74,6 +74,7 @@ class DepthCameraSim:
         self._bodies = robot_bodies(robot)
         self._data = robot.model.createData()
         self._next: float | None = None
+        self._turn = 0
         self.published = 0
         self._publishers = {}
         for frame in self.mounts:
@@ -106,32 +107,36 @@ class DepthCameraSim:
         )
 
     def step(self, now: float | None = None) -> int:
-        """Publish every camera's image when due at monotonic time ``now`` [s]; returns how many were published."""
+        """Publish the next camera's image when due at monotonic time ``now`` [s]; returns how many were published.
+
+        The cameras take turns (each at ``rate``), so one call renders one image: the simulated robot's loop, which
+        also publishes the joint states, is held up by one render at a time.
+        """
         now = time.monotonic() if now is None else float(now)
         if self._next is None:
             self._next = now
         if now + 1e-9 < self._next:
             return 0
-        self._next = max(self._next + self.period, now - self.period / 2)
+        frames = list(self._publishers)
+        self._next = max(self._next + self.period / len(frames), now - self.period / 2)
+        frame = frames[self._turn % len(frames)]
+        self._turn += 1
         q = np.array(self.sim.q, dtype=float)
         stamp = self.clock()
-        info = self.camera.to_camera_info()
-        count = 0
-        for frame, (image_publisher, info_publisher) in self._publishers.items():
-            millimetres = depth_to_16uc1(self.render(q, frame))
-            info_publisher.publish(dict(info, stamp=stamp, frame_id=frame))
-            image_publisher.publish(
-                {
-                    "stamp": stamp,
-                    "frame_id": frame,
-                    "height": self.camera.height,
-                    "width": self.camera.width,
-                    "encoding": "16UC1",
-                    "is_bigendian": 0,
-                    "step": 2 * self.camera.width,
-                    "data": millimetres.astype("<u2").tobytes(),
-                }
-            )
-            count += 1
-        self.published += count
-        return count
+        image_publisher, info_publisher = self._publishers[frame]
+        millimetres = depth_to_16uc1(self.render(q, frame))
+        info_publisher.publish(dict(self.camera.to_camera_info(), stamp=stamp, frame_id=frame))
+        image_publisher.publish(
+            {
+                "stamp": stamp,
+                "frame_id": frame,
+                "height": self.camera.height,
+                "width": self.camera.width,
+                "encoding": "16UC1",
+                "is_bigendian": 0,
+                "step": 2 * self.camera.width,
+                "data": millimetres.astype("<u2").tobytes(),
+            }
+        )
+        self.published += 1
+        return 1
