@@ -548,32 +548,42 @@ _kernels: dict[str, Any] = {}
 
 
 def _native_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:
-    """The compiled end point kernel of the world's bodies (cached per body set), or None (numpy path)."""
+    """The compiled end point kernel of the world's bodies, checked against pinocchio, or None (numpy path).
+    Cached per model and body set: worlds of one robot share it (calls are sequential and copy the outputs)."""
     try:
-        import casadi as ca
-
-        from taplan.ik._kernel_math import joint_axes
-        from taplan.ik._native import compile_function, native_enabled
+        from taplan.ik._native import native_enabled
     except ImportError:  # pragma: no cover - casadi is a dependency
         return None
     if not native_enabled():
         return None
     model = world.model
-    axes = joint_axes(model)
-    if axes is None:
-        return None
     key = repr(
         (
             model.name,
             model.nq,
+            [
+                (j.idx_q, p.translation.tolist(), p.rotation.tolist())
+                for j, p in zip(model.joints, model.jointPlacements, strict=True)
+            ],
             [(b.joint, np.round(b.start, 12).tolist(), np.round(b.end, 12).tolist()) for b in world.bodies],
         )
     )
     if key not in _kernels:
-        _kernels[key] = _build_kernel(world, axes, ca)
-    function = _kernels[key]
-    if function is None:
+        _kernels[key] = _checked_kernel(world)
+    return _kernels[key]
+
+
+def _checked_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:
+    import casadi as ca
+
+    from taplan.ik._kernel_math import joint_axes
+    from taplan.ik._native import compile_function
+
+    model = world.model
+    axes = joint_axes(model)
+    if axes is None:
         return None
+    function = _build_kernel(world, axes, ca)
     B, nv = len(world.bodies), model.nv
     q_in, e_out, j_out = np.zeros(model.nq), np.zeros(6 * B), np.zeros(6 * B * nv)
     native = compile_function(function, [q_in], [e_out, j_out])
