@@ -6,8 +6,10 @@
    from the robot itself, else :class:`~taplan.errors.CollisionError` naming the pair and the distance in mm. An end
    closer than ``margin`` is left or approached along a short certified segment (:mod:`~taplan.planning.ends`).
 2. **Goal IK** (pose goals ``{frame: T_root_frame}``): :func:`~taplan.ik.solve_pose` from the start, the home
-   configuration and seeded random configurations; solutions closer than ``floor`` are rejected, and the one
-   closest to the start (joint space) among those clear of ``margin`` wins (else among those clear of ``floor``).
+   configuration and seeded random configurations; solutions closer than ``floor`` are rejected. The start seed's
+   solution wins when it is clear of ``margin`` (IK from the start converges to a solution near it: one solve
+   instead of three); else the one closest to the start (joint space) among those clear of ``margin`` (else among
+   those clear of ``floor``).
    None: :class:`~taplan.errors.PlanningError` naming the target.
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
@@ -42,7 +44,7 @@ from taplan.limits import JointLimits
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
 from taplan.planning.optimize import optimize_path
 from taplan.planning.rrt import rrt_connect, shortcut
-from taplan.planning.verify import MIN_CERTIFIED, check_segment, verify_trajectory
+from taplan.planning.verify import MIN_CERTIFIED, SegmentCheck, Verification, check_segment, verify_trajectory
 from taplan.robot import Robot
 from taplan.scene.scene import Scene
 from taplan.scene.world import CollisionWorld
@@ -130,16 +132,17 @@ def _find_path(
     deadline: float,
     rng: np.random.Generator,
     times: dict[str, float],
-) -> tuple[str, list[np.ndarray]] | None:
-    """(stage, path): the first stage in ``stages`` that finds a certified path before ``deadline``
-    (``time.perf_counter()``), else None; a sampled path is shortcut but not yet smoothed."""
+) -> tuple[str, list[np.ndarray], SegmentCheck | None] | None:
+    """(stage, path, the straight segment's certificate or None): the first stage in ``stages`` that finds a
+    certified path before ``deadline`` (``time.perf_counter()``), else None; a sampled path is shortcut but not yet
+    smoothed."""
     for stage in stages:
         clock = time.perf_counter()
         if stage == "straight":
-            found = check_segment(world, q0, q1, margin).valid
+            certificate = check_segment(world, q0, q1, margin)
             times["straight"] += time.perf_counter() - clock
-            if found:
-                return stage, [q0, q1]
+            if certificate.valid:
+                return stage, [q0, q1], certificate
         elif stage == "optimization":
             for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, rng):
                 if time.perf_counter() >= deadline:
@@ -147,7 +150,7 @@ def _find_path(
                 result = optimize_path(world, seed_path, active, limits.lower, limits.upper, margin, deadline=deadline)
                 if result is not None:
                     times["optimize"] += time.perf_counter() - clock
-                    return stage, list(result.path)
+                    return stage, list(result.path), None
             times["optimize"] += time.perf_counter() - clock
         else:
             remaining = max(deadline - time.perf_counter(), 0.0)
@@ -159,7 +162,7 @@ def _find_path(
                 break
             path = shortcut(world, found_path, margin, rng=rng, deadline=deadline)
             times["sample"] += time.perf_counter() - clock
-            return stage, path
+            return stage, path, None
     return None
 
 
@@ -202,8 +205,9 @@ def _goal_ik(
     rng: np.random.Generator,
     deadline: float,
 ) -> np.ndarray:
-    """The goal IK solution closest to the start among those at least ``margin`` from everything, else among those
-    at least ``floor`` (their plans approach them along a certified segment); seeds stop at ``deadline``."""
+    """The start seed's goal IK solution when it is at least ``margin`` from everything, else the one closest to the
+    start among those at least ``margin`` away, else among those at least ``floor`` (their plans approach them along
+    a certified segment); seeds stop at ``deadline``."""
     from taplan.ik.solve_pose import solve_pose
 
     lower, upper = limits.lower, limits.upper
@@ -228,8 +232,8 @@ def _goal_ik(
         distance = float(np.linalg.norm(result.q - start))
         if distance < cost[clear]:
             best[clear], cost[clear] = result.q, distance
-        if True in best and k >= 2:
-            break  # the start and home seeds were tried; a clear solution near the start is enough
+        if True in best and k in (0, 2):
+            break  # warm start: the start seed's clear solution, or the start and home seeds were tried
     if not best:
         raise PlanningError(f"goal {sorted(targets)}: unreachable without collision ({reason})")
     return best.get(True, best.get(False))
@@ -288,8 +292,11 @@ def _time_and_verify(
     max_deviation: float,
     deadline: float,
     times: dict[str, float],
+    certificate: SegmentCheck | None = None,
 ) -> _Timed | str:
-    """The timed, verified trajectory of ``path`` with its approach segments, or why there is none (a sentence)."""
+    """The timed, verified trajectory of ``path`` with its approach segments, or why there is none (a sentence).
+    A straight path's ``certificate`` (``margin / 2`` along the segment) certifies its ruckig timing when that stays
+    on the segment (:func:`_on_certified_segment`): no second certificate of the same configurations."""
     from taplan.timing.jerk_limited import jerk_limited
     from taplan.timing.straight import straight_line
 
@@ -337,7 +344,10 @@ def _time_and_verify(
         middle = _full_trajectory(part, names, active, q0)
         times["timing"] += time.perf_counter() - clock
         clock = time.perf_counter()
-        check = verify_trajectory(world, middle, floor=margin / 4, hold=q0, deadline=deadline)
+        if plan is None and certificate is not None and _on_certified_segment(world, middle, path, margin):
+            check = Verification(True, certificate.clearance, certificate.pair, 0.0, 0)
+        else:
+            check = verify_trajectory(world, middle, floor=margin / 4, hold=q0, deadline=deadline)
         times["verify"] += time.perf_counter() - clock
         if check.timed_out:
             return f"the time budget ran out while verifying timing {attempt + 1}"
@@ -351,6 +361,34 @@ def _time_and_verify(
             f"({check.pair[0]} / {check.pair[1]} at t = {check.time:.3f} s) after {attempt + 1} timings: not returned"
         )
     return why
+
+
+def _on_certified_segment(world: CollisionWorld, trajectory: Trajectory, path: list[np.ndarray], margin: float) -> bool:
+    """True when ``trajectory`` (all joints) stays so close to the segment ``path[0] → path[1]`` (certified to keep
+    ``margin / 2``) that it keeps more than ``margin / 4``: per joint its deviation from the segment is bounded by the
+    part of each coefficient across the segment's direction (``Σ_k |r_k| h^k`` per piece) plus any overshoot of the
+    segment parameter beyond [0, 1] (exact range of that polynomial); the robot's points then move at most
+    ``Σ_j reach_j dev_j`` [m] off the certified configurations."""
+    from taplan.timing._polynomial import position_range
+
+    a, b = path[0], path[1]
+    d = b - a
+    norm2 = float(d @ d)
+    if norm2 <= 0.0:
+        return False
+    c = trajectory.coefficients.copy()  # (m, order, nq)
+    c[:, 0] -= a
+    along = np.einsum("mkj,j->mk", c, d) / norm2  # the segment parameter's coefficients
+    across = c - along[:, :, None] * d  # what leaves the segment
+    h = np.diff(trajectory.times)
+    powers = h[:, None] ** np.arange(c.shape[1])[None, :]  # (m, order)
+    deviation = (np.abs(across) * powers[:, :, None]).sum(axis=1).max(axis=0)  # per joint, worst piece [rad]
+    s = Trajectory.from_polynomials(trajectory.times, along[:, :, None], ("s",))
+    low, high = position_range(s)
+    overshoot = max(0.0, float(high[0]) - 1.0, -float(low[0]))
+    deviation = deviation + overshoot * np.abs(d)
+    off = world.max_point_speed_bound(np.zeros_like(a), deviation)
+    return margin / 2 - off > margin / 4 + MIN_CERTIFIED
 
 
 def _check_budget(max_time: Any) -> float:
@@ -463,12 +501,12 @@ def plan_motion(
                 f"no collision-free path found within {max_time:g} s (stages: {', '.join(stages)}; "
                 f"{reserve:.2f} s of the budget kept for timing and verification)"
             )
-        stage, path = found
+        stage, path, certificate = found
     else:
-        stage, path = "straight", [a, b]  # both ends retreat to one clear configuration
+        stage, path, certificate = "straight", [a, b], None  # both ends retreat to one clear configuration
     clock = time.perf_counter()
     timed = _time_and_verify(
-        robot, world, path, approaches, active, limits, q0, q1, margin, max_deviation, deadline, times
+        robot, world, path, approaches, active, limits, q0, q1, margin, max_deviation, deadline, times, certificate
     )
     finish = time.perf_counter() - clock
     if isinstance(timed, str):

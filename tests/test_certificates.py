@@ -1,0 +1,70 @@
+"""Batched certificates: check_segments agrees with one-at-a-time checks and with dense sampling; a straight plan's
+timing reuses its segment certificate only when it stays on the segment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import taplan
+from taplan.planning import check_segment, check_segments, plan_motion, verify_trajectory
+from taplan.planning.motion import _on_certified_segment
+from taplan.scene import Box, CollisionWorld, HalfSpace, Scene
+from taplan.timing import jerk_limited
+
+MARGIN = 0.01  # [m]
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+@pytest.fixture(scope="module")
+def world(robot) -> CollisionWorld:
+    scene = Scene()
+    scene.add("floor", HalfSpace(), ([0.0, 0.0, -1.0], [0, 0, 0, 1]))
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.45], [0, 0, 0, 1]))
+    scene.add("panel", Box((0.5, 0.02, 0.5)), ([0.5, 0.0, -0.2], [0, 0, 0, 1]))
+    return CollisionWorld(robot, scene)
+
+
+def _segments(robot: taplan.Robot, world: CollisionWorld, count: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(3)
+    limits = robot.planning_limits
+    starts, ends = [], []
+    while len(starts) < count:
+        a, b = robot.home.copy(), robot.home.copy()
+        for q in (a, b):
+            q[robot.group("right").indices] += rng.uniform(-0.8, 0.8, 7)
+            np.clip(q, limits.lower, limits.upper, out=q)
+        if world.min_distance(a)[0] > MARGIN and world.min_distance(b)[0] > MARGIN:
+            starts.append(a)
+            ends.append(b)
+    return np.array(starts), np.array(ends)
+
+
+def test_batched_segment_checks_agree_with_single_checks_and_dense_sampling(robot, world) -> None:
+    starts, ends = _segments(robot, world, 12)
+    batch = check_segments(world, starts, ends, MARGIN)
+    verdicts = [c.valid for c in batch]
+    assert any(verdicts) and not all(verdicts)  # both outcomes exercised
+    for a, b, got in zip(starts, ends, batch, strict=True):
+        assert got.valid == check_segment(world, a, b, MARGIN).valid
+        if got.valid:  # the certificate holds between its evaluations: margin / 2 everywhere
+            lowest = min(world.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 201))
+            assert lowest >= MARGIN / 2 - 1e-9
+
+
+def test_a_straight_plan_reuses_its_segment_certificate_only_on_the_segment(robot, world) -> None:
+    starts, ends = _segments(robot, world, 12)
+    k = next(i for i, c in enumerate(check_segments(world, starts, ends, MARGIN)) if c.valid)
+    plan = plan_motion(robot, starts[k], ends[k], world=world, margin=MARGIN)
+    assert plan.report.stage == "straight"
+    assert verify_trajectory(world, plan.trajectory, floor=MARGIN / 4, hold=starts[k]).collision_free
+    assert _on_certified_segment(world, plan.trajectory, [starts[k], ends[k]], MARGIN)
+    # a motion through a point 0.2 rad off the segment is not on it
+    middle = (starts[k] + ends[k]) / 2
+    middle[robot.group("right").indices[1]] += 0.2
+    detour = jerk_limited(np.array([starts[k], middle, ends[k]]), robot.planning_limits).trajectory
+    assert not _on_certified_segment(world, detour, [starts[k], ends[k]], MARGIN)
