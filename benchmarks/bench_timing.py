@@ -7,10 +7,13 @@ gridpoint proposal and ``ParametrizeSpline`` output, on the same ``taplan.timing
 
 Also (issue 21): the near-bound sweep (``--sweep N`` paths of 2-5,000 waypoints drawn up to and onto the position
 bounds, with duplicates, tiny steps and reversals: refusals and exact violations of every limit, position
-included), and recorded demonstrations (synthetic teleoperation recordings with noise at 30 and 100 Hz through
-``taplan.timing.time_demonstration``: compute, deviation, duration against the recording).
+included; ``--cartesian N`` Cartesian lines from starts on the bounds), and recorded demonstrations (synthetic
+teleoperation recordings with noise at 30 and 100 Hz through ``taplan.timing.time_demonstration``: compute,
+deviation, duration against the recording).
 
-Run: ``python -m benchmarks.bench_timing [--quick] [--repeats N] [--sweep N]``.
+Run: ``python -m benchmarks.bench_timing [--quick] [--repeats N] [--sweep N] [--cartesian N]`` (the default sweep,
+1,000 paths with the path filter on every one up to 30 waypoints and 300 Cartesian lines, takes about an hour on
+the shared 2-core machine).
 """
 
 from __future__ import annotations
@@ -139,10 +142,10 @@ def run(sizes: tuple[int, ...], seeds: int, repeats: int, jerk: bool, large: tup
 
 SWEEP_SIZES = (2, 3, 4, 5, 6, 8, 10, 15, 20, 30)  # most paths: short ones, where the hard cases are dense
 SWEEP_LARGE = (200, 1000, 5000)  # and one each of these
-PATH_METHOD_EVERY = 20  # the path filter (seconds per path) on every 20th path of <= 10 waypoints
+PATH_METHOD_MAX_WAYPOINTS = 30  # the path filter (seconds per path at 200 waypoints) on every path up to this size
 
 
-def sweep(count: int) -> dict[str, Any]:
+def sweep(count: int, path_method: bool = True) -> dict[str, Any]:
     """Near-bound sweep: refusals and exact limit violations of retime and jerk_limited (both methods)."""
     logging.getLogger("toppra").setLevel(logging.ERROR)
     robot = taplan.Robot.teleavatar()
@@ -150,10 +153,11 @@ def sweep(count: int) -> dict[str, Any]:
     sizes = [SWEEP_SIZES[k % len(SWEEP_SIZES)] for k in range(max(0, count - len(SWEEP_LARGE)))]
     sizes += list(SWEEP_LARGE[: min(count, len(SWEEP_LARGE))])
     tally: dict[str, dict[str, Any]] = {}
+    start = time.perf_counter()
     for k, size in enumerate(sizes):
         q = near_bound_walk(limits, size, 7_000_003 + k)
         methods = [("retime", lambda q=q: retime(q, limits)), ("jerk_limited", lambda q=q: jerk_limited(q, limits))]
-        if size <= 10 and k % PATH_METHOD_EVERY == 0:
+        if path_method and size <= PATH_METHOD_MAX_WAYPOINTS:
             methods.append(("jerk_limited_path", lambda q=q: jerk_limited(q, limits, method="path")))
         for name, call in methods:
             entry = tally.setdefault(name, {"paths": 0, "refusals": 0, "violations": 0, "worst": 0.0, "errors": []})
@@ -170,7 +174,55 @@ def sweep(count: int) -> dict[str, Any]:
             entry["worst"] = max(entry["worst"], worst)
             if worst > 1 + 1e-6 or usage.position.max() > 1e-9:
                 entry["violations"] += 1
-    return {"paths": len(sizes), "sizes": sorted(set(sizes)), "methods": tally}
+    elapsed = time.perf_counter() - start
+    return {"paths": len(sizes), "sizes": sorted(set(sizes)), "methods": tally, "seconds": elapsed}
+
+
+def cartesian_sweep(count: int) -> dict[str, Any]:
+    """Cartesian lines from starts on and near the position bounds (``taplan.timing.cartesian_offset``, both
+    timings): refusals by the timing (TimingError), lines the IK finds blocked (InfeasibleError: a joint limit or
+    the workspace), and exact limit violations of the lines that were planned."""
+    logging.getLogger("toppra").setLevel(logging.ERROR)
+    from taplan.timing import cartesian_offset
+
+    robot = taplan.Robot.teleavatar()
+    limits = robot.planning_limits
+    tally: dict[str, dict[str, Any]] = {}
+    start = time.perf_counter()
+    for k in range(count):
+        rng = np.random.default_rng(8_000_009 + k)
+        side = ("left", "right")[k % 2]
+        joints = np.array([robot.joint_names.index(n) for n in robot.group(side).joint_names])
+        q = robot.home.copy()
+        lo, hi = limits.lower[joints], limits.upper[joints]
+        q[joints] = rng.uniform(lo, hi)
+        on_bound = rng.random(joints.size) < 0.3  # some joints on a bound or within 1 mrad of it
+        gap = np.where(rng.random(joints.size) < 0.5, 0.0, rng.uniform(0.0, 1e-3, joints.size))
+        q[joints[on_bound]] = np.where(rng.random(joints.size) < 0.5, hi - gap, lo + gap)[on_bound]
+        offset = rng.normal(size=3)
+        offset *= rng.uniform(0.01, 0.08) / np.linalg.norm(offset)
+        method = ("jerk", "topp")[(k // 2) % 2]
+        entry = tally.setdefault(
+            method, {"lines": 0, "planned": 0, "refusals": 0, "blocked": 0, "violations": 0, "worst": 0.0, "errors": []}
+        )
+        entry["lines"] += 1
+        try:
+            result = cartesian_offset(robot, q, {f"{side}_ee": offset}, method=method)
+        except taplan.InfeasibleError:
+            entry["blocked"] += 1
+            continue
+        except taplan.TaplanError as exc:
+            entry["refusals"] += 1
+            entry["errors"].append(f"line {k}: {type(exc).__name__}: {exc}")
+            continue
+        entry["planned"] += 1
+        bounds = limits.replace(lower=np.minimum(limits.lower, q), upper=np.maximum(limits.upper, q))  # widened
+        usage = limit_usage(result.trajectory, bounds)
+        worst = max(usage.max_velocity, usage.max_acceleration, usage.max_jerk if method == "jerk" else 0.0)
+        entry["worst"] = max(entry["worst"], worst)
+        if worst > 1 + 1e-6 or usage.position.max() > 1e-9:
+            entry["violations"] += 1
+    return {"lines": count, "methods": tally, "seconds": time.perf_counter() - start}
 
 
 def demonstrations(duration: float = 30.0, seeds: int = 2) -> list[dict[str, Any]]:
@@ -206,27 +258,46 @@ def demonstrations(duration: float = 30.0, seeds: int = 2) -> list[dict[str, Any
     return rows
 
 
-def _sweep_markdown(result: dict[str, Any]) -> list[str]:
+def _sweep_markdown(result: dict[str, Any], lines: dict[str, Any] | None) -> list[str]:
     rows = [
         [name, e["paths"], e["refusals"], e["violations"], f"{e['worst']:.9f}"] for name, e in result["methods"].items()
     ]
     ok = all(e["refusals"] == 0 and e["violations"] == 0 for e in result["methods"].values())
-    lines = [
+    text = [
         "### Near-bound sweep (issue 21)",
         "",
         f"{result['paths']} seeded paths (`benchmarks._paths.near_bound_walk`, right arm, planning limits) of "
         f"{min(result['sizes'])}-{max(result['sizes'])} waypoints: random steps clipped onto the bounds, joints set "
         "onto a bound or within 1 mrad of it, duplicates, tiny steps (1e-8-1e-4 rad), reversals. The path filter "
-        f"runs on every {PATH_METHOD_EVERY}th path of <= 10 waypoints. Violations are exact peaks over 1 + 1e-6 of a "
-        "limit or a position more than 1e-9 rad outside the bounds; the tests add a 10 kHz finite-difference check.",
+        f"(`method='path'`) runs on every path of up to {PATH_METHOD_MAX_WAYPOINTS} waypoints. Violations are exact "
+        "peaks over 1 + 1e-6 of a limit or a position more than 1e-9 rad outside the bounds; the tests add a 10 kHz "
+        f"finite-difference check. {result['seconds']:.0f} s in all.",
         "",
         _harness.markdown_table(["method", "paths", "refusals", "violations", "worst peak / limit"], rows),
-        "",
-        f"- 0 refusals and 0 violations: **{'met' if ok else 'NOT met'}**",
     ]
-    for e in result["methods"].values():
-        lines += [f"  - refused: {err}" for err in e["errors"][:5]]
-    return lines
+    if lines is not None:
+        rows = [
+            [f"cartesian_offset(method={m!r})", e["lines"], e["planned"], e["blocked"], e["refusals"],
+             e["violations"], f"{e['worst']:.9f}"]
+            for m, e in lines["methods"].items()
+        ]  # fmt: skip
+        ok &= all(e["refusals"] == 0 and e["violations"] == 0 for e in lines["methods"].values())
+        text += [
+            "",
+            f"Cartesian lines: {lines['lines']} seeded 1-8 cm lines of one hand (`cartesian_offset`, default 1 mm "
+            "line deviation) from starts with about 30 % of the arm's joints on a bound or within 1 mrad of it, "
+            "timed jerk-limited and by TOPP-RA in turn. `blocked`: the IK finds the line leaves the joint limits or "
+            "the workspace (InfeasibleError, naming the sample and the joints at their bounds): an infeasible "
+            f"request, not a timing refusal. {lines['seconds']:.0f} s in all.",
+            "",
+            _harness.markdown_table(
+                ["timing", "lines", "planned", "blocked (IK)", "refusals", "violations", "worst peak / limit"], rows
+            ),
+        ]
+    text += ["", f"- 0 refusals and 0 violations: **{'met' if ok else 'NOT met'}**"]
+    for e in [*result["methods"].values(), *(lines["methods"].values() if lines else [])]:
+        text += [f"  - refused: {err}" for err in e["errors"][:5]]
+    return text
 
 
 def _demonstration_markdown(rows: list[dict[str, Any]]) -> list[str]:
@@ -393,6 +464,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-save", action="store_true", help="print only")
     parser.add_argument("--large", default="1000,5000", help="extra sizes planned once each (jerk_limited, retime)")
     parser.add_argument("--sweep", type=int, default=1000, help="near-bound sweep paths (0: skip)")
+    parser.add_argument("--cartesian", type=int, default=300, help="near-bound Cartesian lines (0: skip)")
     args = parser.parse_args(argv)
     sizes = (10, 50) if args.quick else SIZES
     seeds = 1 if args.quick else args.seeds
@@ -405,7 +477,9 @@ def main(argv: list[str] | None = None) -> int:
     count = min(args.sweep, 60) if args.quick else args.sweep
     if count > 0:
         results["sweep"] = sweep(count)
-        text += "\n\n" + "\n".join(_sweep_markdown(results["sweep"]))
+        lines_count = min(args.cartesian, 6) if args.quick else args.cartesian
+        results["cartesian_sweep"] = cartesian_sweep(lines_count) if lines_count > 0 else None
+        text += "\n\n" + "\n".join(_sweep_markdown(results["sweep"], results["cartesian_sweep"]))
     results["demonstrations"] = demonstrations(duration=10.0 if args.quick else 30.0, seeds=1 if args.quick else 2)
     text += "\n\n" + "\n".join(_demonstration_markdown(results["demonstrations"]))
     results["loadavg_after"] = os.getloadavg()

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from math import factorial
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +83,6 @@ class Trajectory:
         q = _finite(positions, "positions", ndim=2)
         if q.shape[0] != t.shape[0]:
             raise InvalidInputError("positions", f"shape {q.shape}", f"({t.shape[0]}, n): one row per time")
-        n = q.shape[1]
         v = None if velocities is None else _finite(velocities, "velocities", ndim=2)
         a = None if accelerations is None else _finite(accelerations, "accelerations", ndim=2)
         for name, arr in (("velocities", v), ("accelerations", a)):
@@ -90,6 +90,21 @@ class Trajectory:
                 raise InvalidInputError(name, f"shape {arr.shape}", f"shape {q.shape}, like positions")
         if a is not None and v is None:
             raise InvalidInputError("accelerations", "given without velocities", "velocities as well")
+        self._set_samples(t, q, v, a, joint_names)
+        self._coefficients = _segment_coefficients(t, q, v, a)  # (N-1, d+1, n), powers of (t - t_k)
+        self._polynomial = False
+        self._derived: dict[int, np.ndarray] = {}
+
+    def _set_samples(
+        self,
+        t: np.ndarray,
+        q: np.ndarray,
+        v: np.ndarray | None,
+        a: np.ndarray | None,
+        joint_names: Sequence[str] | None,
+    ) -> None:
+        """Store validated samples (read-only) and the joint names (checked)."""
+        n = q.shape[1]
         names = tuple(joint_names) if joint_names is not None else tuple(f"joint{i}" for i in range(n))
         if len(names) != n or len(set(names)) != n:
             raise InvalidInputError("joint_names", names, f"{n} unique names")
@@ -98,9 +113,6 @@ class Trajectory:
                 arr.setflags(write=False)
         self.times, self.positions, self.velocities, self.accelerations = t, q, v, a
         self.joint_names: tuple[str, ...] = tuple(str(x) for x in names)
-        self._coefficients = _segment_coefficients(t, q, v, a)  # (N-1, d+1, n), powers of (t - t_k)
-        self._polynomial = False
-        self._derived: dict[int, np.ndarray] = {}
 
     @classmethod
     def from_polynomials(
@@ -134,17 +146,18 @@ class Trajectory:
         if np.any(h <= _TIME_TOL):
             raise InvalidInputError("times", t, "strictly increasing sample times")
         ends = [_polyval(c, h, order) for order in (0, 1, 2)]  # (N-1, n) values at each segment's end
+        starts = [c[:, order] * factorial(order) for order in (0, 1, 2)]  # the same at each segment's start
         checks = ((0, "position"), (1, "velocity")) if continuous_velocity else ((0, "position"),)
         for order, name in checks:
-            jump = np.abs(ends[order][:-1] - _polyval(c[1:], np.zeros(len(h) - 1), order)) if len(h) > 1 else None
+            jump = np.abs(ends[order][:-1] - starts[order][1:]) if len(h) > 1 else None
             if jump is not None and jump.size and float(np.max(jump)) > continuity_tol:
                 k = int(np.argmax(np.max(jump, axis=1)))
                 raise InvalidInputError(
                     "coefficients", f"{name} jump {float(np.max(jump[k])):.3g} at times[{k + 1}]", "continuous segments"
                 )
-        starts = [_polyval(c, np.zeros(len(h)), order) for order in (0, 1, 2)]
         q, v, a = (np.vstack([starts[o], ends[o][-1:]]) for o in (0, 1, 2))
-        traj = cls(t, q, v, a, joint_names)
+        traj = cls.__new__(cls)  # times and coefficients are validated: skip __init__'s Hermite coefficients
+        traj._set_samples(t, q, v, a, joint_names)
         c.setflags(write=False)
         traj._coefficients = c
         traj._polynomial = True

@@ -77,6 +77,28 @@ def test_near_bound_sweep_path_filter(arm: taplan.JointLimits, size: int, seed: 
     assert result.deviation == 0.0
 
 
+@pytest.mark.parametrize(
+    ("count", "seed", "start", "stop"),
+    [(5000, 7_000_003 + 59, 1585, 1598), (15, 7_000_003 + 127, 0, 15)],
+    ids=["clipped-slope-knot", "barely-moving-stretch"],
+)
+def test_paths_toppras_lp_found_uncontrollable_are_timed(arm, count: int, seed: int, start: int, stop: int) -> None:
+    # found by bench_timing's sweep: a knot where a joint's slope was clipped to ~1e-7 next to tiny steps, and a
+    # stretch where the path barely moves (velocity rows of size 1e-5); toppra's seidel LP returned NaN on both
+    # ("not controllable") until the constraint rows were normalised
+    q = near_bound_walk(arm, count, seed)[start:stop]
+    fast = retime(q, arm)
+    usage = limit_usage(fast, arm)
+    assert usage.within(LIMIT_TOL) and usage.position.max() <= POS_TOL
+    assert finite_difference_excess(fast, arm, jerk=False) <= 0.0
+    assert passes_waypoints(fast, q) <= WAYPOINT_TOL
+    for method in ("joint", "path"):
+        smooth = jerk_limited(q, arm, method=method).trajectory
+        usage = limit_usage(smooth, arm)
+        assert usage.within(LIMIT_TOL, jerk=True) and usage.position.max() <= POS_TOL
+        assert finite_difference_excess(smooth, arm, jerk=True) <= 0.0
+
+
 def test_bounded_path_stays_in_the_box_where_the_spline_overshoots() -> None:
     # a joint that climbs onto its bound and turns back: the cubic spline overshoots the top between waypoints
     q = np.array([[0.0], [0.45], [0.6], [0.6 - 1e-4], [0.2], [0.59]])

@@ -14,6 +14,7 @@ from taplan.timing import limit_usage
 CHECK_RATE = 1000.0  # [Hz] independent FK sampling of the timed trajectories
 DEVIATION_BOUND = 1e-4  # [m] stated bound for these lines (the default max_deviation is 1 mm)
 ANGLE_BOUND = 1e-3  # [rad]
+DEFAULT_LINE_DEVIATION = 1e-3  # [m] cartesian_line's default max_deviation
 ENDPOINT_TOL = (1e-5, 1e-4)  # ([m], [rad]) goal reached
 LIMIT_TOL = 1e-6  # relative
 REST_TOL = 1e-9  # [rad]/[s] velocity at the ends
@@ -132,6 +133,26 @@ def test_joint_limit_blocking_the_line_is_reported(teleavatar: taplan.Robot) -> 
     # from the vendor's ready pose l_joint7 sits on its bound, and straight down needs it to go further
     with pytest.raises(InfeasibleError, match="l_joint7"):
         cartesian_offset(teleavatar, READY, {"left_ee": [0.0, 0.0, -0.12]}, refinements=0)
+
+
+@pytest.mark.parametrize(("seed", "method"), [(0, "jerk"), (3, "topp"), (4, "jerk"), (5, "topp")])
+def test_lines_from_starts_on_the_bounds_are_timed_inside_every_limit(teleavatar, seed: int, method: str) -> None:
+    # issue 21 (bench_timing's Cartesian sweep in small): r_joint4 on a bound, r_joint7 0.5 mrad from one; the
+    # timing stays inside every limit (exact peaks, positions included) and the hand on its line
+    rng = np.random.default_rng(seed)
+    limits = teleavatar.planning_limits
+    joints = np.array([teleavatar.joint_names.index(n) for n in teleavatar.group("right").joint_names])
+    q = teleavatar.home.copy()
+    q[joints] = rng.uniform(limits.lower[joints], limits.upper[joints])
+    gap = np.array([0, 0, 0, 0, 0, 0, 5e-4])
+    near = np.where(rng.random(7) < 0.5, limits.upper[joints] - gap, limits.lower[joints] + gap)
+    q[joints[[3, 6]]] = near[[3, 6]]
+    direction = rng.normal(size=3)
+    res = cartesian_offset(teleavatar, q, {"right_ee": 0.03 * direction / np.linalg.norm(direction)}, method=method)
+    usage = limit_usage(res.trajectory, limits)
+    assert usage.within(LIMIT_TOL, jerk=method == "jerk") and usage.position.max() <= 1e-9
+    assert res.max_position_deviation <= DEFAULT_LINE_DEVIATION
+    np.testing.assert_array_equal(res.trajectory(0.0), q)
 
 
 def test_joint_starting_outside_planning_bounds_is_widened(teleavatar: taplan.Robot) -> None:

@@ -76,3 +76,28 @@ def test_state_to_state_meets_the_goal_state_within_the_limits(teleavatar) -> No
         np.testing.assert_allclose(motion(0.0, k), start[k], atol=1e-9)
         np.testing.assert_allclose(motion(motion.duration, k), goal[k], atol=1e-7)
     assert limit_usage(motion, limits).within(1e-9, jerk=True)
+
+
+def test_near_cubic_bounds_contain_the_sampled_range_and_peaks() -> None:
+    # ruckig's windows in jerk_limited are checked with these bounds: never below the truth, tight for cubics
+    from taplan.timing._polynomial import max_abs_derivative, near_cubic_bounds
+
+    rng = np.random.default_rng(3)
+    times = np.array([0.0, 0.3, 0.7, 1.0])
+    coefficients = np.zeros((3, 6, 2))
+    coefficients[:, :4] = rng.normal(size=(3, 4, 2))
+    coefficients[:, 4:] = 1e-9 * rng.normal(size=(3, 2, 2))  # like ruckig's end correction
+    for k in (1, 2):  # continuous position and velocity across the pieces
+        h = times[k] - times[k - 1]
+        coefficients[k, 0] = sum(coefficients[k - 1, i] * h**i for i in range(6))
+        coefficients[k, 1] = sum(i * coefficients[k - 1, i] * h ** (i - 1) for i in range(1, 6))
+    traj = taplan.Trajectory.from_polynomials(times, coefficients)
+    low, high, peaks = near_cubic_bounds(times, coefficients)
+    q = traj(np.linspace(0.0, 1.0, 200_001))
+    assert np.all(low <= q.min(axis=0)) and np.all(high >= q.max(axis=0))
+    np.testing.assert_allclose(low, q.min(axis=0), atol=1e-8)
+    np.testing.assert_allclose(high, q.max(axis=0), atol=1e-8)
+    for order in (1, 2, 3):
+        exact = max_abs_derivative(traj, order).max(axis=0)
+        assert np.all(peaks[order - 1] >= exact)
+        np.testing.assert_allclose(peaks[order - 1], exact, rtol=1e-7)

@@ -8,7 +8,16 @@ import numpy as np
 
 from taplan.trajectory import Trajectory
 
-__all__ = ["compose_quadratic", "concatenated", "max_abs_derivative", "position_range", "sliced", "time_scaled"]
+__all__ = [
+    "compose_quadratic",
+    "concatenated",
+    "max_abs_derivative",
+    "near_cubic_bounds",
+    "position_range",
+    "sliced",
+    "sliced_pieces",
+    "time_scaled",
+]
 
 _SAMPLES = 12  # samples per segment before locating the extrema by bisection
 _BISECTIONS = 48
@@ -108,6 +117,11 @@ def time_scaled(traj: Trajectory, factor: float) -> Trajectory:
 
 def sliced(traj: Trajectory, start: float, end: float) -> Trajectory:
     """The part of ``traj`` between ``start`` and ``end`` [s], exact, re-timed to start at 0."""
+    return Trajectory.from_polynomials(*sliced_pieces(traj, start, end), traj.joint_names)
+
+
+def sliced_pieces(traj: Trajectory, start: float, end: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sliced` as ``(times from 0, coefficients)``, without building a :class:`Trajectory`."""
     times = traj.times
     inner = times[(times > start + 1e-12) & (times < end - 1e-12)]
     breaks = np.concatenate([[start], inner, [end]])
@@ -115,23 +129,29 @@ def sliced(traj: Trajectory, start: float, end: float) -> Trajectory:
     c = traj.coefficients[k]
     shift = breaks[:-1] - times[k]
     degree = c.shape[1] - 1
-    out = np.zeros_like(c)
-    for j in range(degree + 1):  # re-expand each piece about its new start
-        for i in range(j, degree + 1):
-            out[:, j] += comb(i, j) * (shift[:, None] ** (i - j)) * c[:, i]
-    return Trajectory.from_polynomials(breaks - start, out, traj.joint_names)
+    # re-expand each piece about its new start: out_j = sum_i C(i, j) shift^(i-j) c_i
+    binomial = np.array([[comb(i, j) for i in range(degree + 1)] for j in range(degree + 1)], dtype=float)
+    exponent = np.maximum(np.arange(degree + 1)[None, :] - np.arange(degree + 1)[:, None], 0)
+    weights = binomial[None] * shift[:, None, None] ** exponent[None]  # (m, j, i); zero where i < j
+    out = np.einsum("mji,min->mjn", weights, c)
+    return breaks - start, out
 
 
-def concatenated(parts: list[Trajectory]) -> Trajectory:
-    """The trajectories one after the other (each starting where the previous one ends), exact."""
-    width = max(p.coefficients.shape[1] for p in parts)
+def concatenated(
+    parts: list[Trajectory | tuple[np.ndarray, np.ndarray]], joint_names: tuple[str, ...] | None = None
+) -> Trajectory:
+    """The trajectories one after the other (each starting where the previous one ends), exact. ``parts`` are
+    trajectories or ``(times, coefficients)`` pairs; ``joint_names`` default to the first trajectory's."""
+    pairs = [(p.times, p.coefficients) if isinstance(p, Trajectory) else p for p in parts]
+    if joint_names is None:
+        joint_names = next(p.joint_names for p in parts if isinstance(p, Trajectory))
+    width = max(c.shape[1] for _, c in pairs)
     times, pieces, offset = [0.0], [], 0.0
-    for part in parts:
-        times += list(offset + part.times[1:] - part.times[0])
-        c = part.coefficients
+    for t, c in pairs:
+        times += list(offset + t[1:] - t[0])
         pieces.append(np.pad(c, ((0, 0), (0, width - c.shape[1]), (0, 0))))
-        offset += part.duration
-    return Trajectory.from_polynomials(np.array(times), np.concatenate(pieces), parts[0].joint_names)
+        offset += float(t[-1] - t[0])
+    return Trajectory.from_polynomials(np.array(times), np.concatenate(pieces), joint_names)
 
 
 def position_range(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
@@ -153,6 +173,55 @@ def position_range(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     x = np.stack(candidates)  # (4, m, n)
     values = c0 + x * (c1 + x * (c2 + x * c3))
     return values.min(axis=(0, 1)), values.max(axis=(0, 1))
+
+
+def near_cubic_bounds(times: np.ndarray, coefficients: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rigorous bounds for pieces that are cubics plus a small higher-degree rest (ruckig's motions with their
+    1e-12 end correction): the cubic part's extrema in closed form, plus the largest the rest can add on the piece
+    (``sum_i |c_i| i!/(i-k)! h^(i-k)``). Cheaper than :func:`position_range` and :func:`max_abs_derivative` on
+    quintics, and never below the true values.
+
+    Returns:
+        ``(low (n,), high (n,), peaks (3, n))``: position range [rad] and the largest ``|q̇|``, ``|q̈|``, ``|jerk|``.
+    """
+    c = coefficients
+    h = np.diff(times)[:, None]  # (m, 1)
+    c0, c1, c2, c3 = (c[:, i] for i in range(4))
+    rest = np.abs(c[:, 4:])  # (m, r, n)
+    powers = np.arange(4, c.shape[1])
+
+    def slack(order: int) -> np.ndarray:  # bound of the rest's order-th derivative on [0, h], (m, n)
+        if rest.shape[1] == 0:
+            return np.zeros_like(c0)
+        falling = np.array([np.prod(np.arange(p - order + 1, p + 1)) for p in powers], dtype=float)
+        return np.einsum("mrn,r,mr->mn", rest, falling, h ** (powers - order))
+
+    # position: cubic extrema where c1 + 2 c2 x + 3 c3 x² = 0 inside [0, h]
+    candidates = [np.zeros_like(c0), np.broadcast_to(h, c0.shape)]
+    disc = np.maximum(4 * c2**2 - 12 * c3 * c1, 0.0)
+    quadratic = np.abs(c3) > 1e-300
+    linear = np.abs(c2) > 1e-300
+    for sign in (-1.0, 1.0):
+        root = np.where(quadratic, (-2 * c2 + sign * np.sqrt(disc)) / np.where(quadratic, 6 * c3, 1.0), 0.0)
+        root = np.where(quadratic, root, np.where(linear, -c1 / np.where(linear, 2 * c2, 1.0), 0.0))
+        candidates.append(np.clip(root, 0.0, h))
+    x = np.stack(candidates)
+    values = c0 + x * (c1 + x * (c2 + x * c3))
+    position_slack = slack(0)
+    low = (values.min(axis=0) - position_slack).min(axis=0)
+    high = (values.max(axis=0) + position_slack).max(axis=0)
+    # velocity c1 + 2 c2 x + 3 c3 x²: ends and vertex; acceleration 2 c2 + 6 c3 x: ends; jerk 6 c3
+    vertex = np.clip(np.where(quadratic, -c2 / np.where(quadratic, 3 * c3, 1.0), 0.0), 0.0, h)
+    velocity = np.stack([c1 + y * (2 * c2 + 3 * c3 * y) for y in (candidates[0], candidates[1], vertex)])
+    acceleration = np.stack([2 * c2, 2 * c2 + 6 * c3 * h])
+    peaks = np.stack(
+        [
+            (np.abs(velocity).max(axis=0) + slack(1)).max(axis=0),
+            (np.abs(acceleration).max(axis=0) + slack(2)).max(axis=0),
+            (np.abs(6 * c3) + slack(3)).max(axis=0),
+        ]
+    )
+    return low, high, peaks
 
 
 def _position_range_roots(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:

@@ -10,8 +10,14 @@ TOPP-RA keeps the path acceleration ``u_i`` constant on ``[s_i, s_{i+1}]``, so t
 
 and the squared path speed ``x_i + 2 (s - s_i) u_i`` are linear in the stage variables ``(u_i, x_i)``. This
 constraint imposes them at the segment's start, at interior fractions (default its middle) and at its end, which is
-toppra's "interpolation" scheme extended with interior points. Velocity rows are normalised
-(``x(s) / x_max(s) <= 1``) so ``F`` and ``g`` are the same at every stage.
+toppra's "interpolation" scheme extended with interior points.
+
+Every row ``a u + b x <= bound`` is divided by ``max(|a|, |b|)``: toppra's seidel LP projects onto a row's line
+along ``(-b, a)`` and treats directions below 1e-10 as parallel, so rows of size 1e-5 (a velocity row
+``x / x_max <= 1`` where the path barely moves, ``x_max ~ 1e5``; an acceleration row where a joint's slope was
+clipped to ~1e-7 at a bound) made it return NaN, reported as "not controllable", on near-bound paths that are
+perfectly feasible. The bound goes into toppra's per-stage offset ``c`` (``F`` is the identity and ``g`` ones at
+every stage). Rows that cannot bind inside the LP's variable range are dropped (exactly redundant).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from toppra.constraint.linear_constraint import LinearConstraint
 __all__ = ["SegmentLimitConstraint", "PathJerkSpeedConstraint", "PathSpeedCap"]
 
 _TINY_TANGENT = 1e-12  # [rad] per unit s: |q'| below this does not bound the path speed
+_VARIABLE_RANGE = 2e8  # |u| + |x| within toppra's seidel LP (its variables stay within +-1e8)
 
 
 class SegmentLimitConstraint(LinearConstraint):
@@ -59,7 +66,7 @@ class SegmentLimitConstraint(LinearConstraint):
         grid = np.asarray(gridpoints, dtype=float)
         count = grid.shape[0]
         fractions = np.concatenate([[0.0], self.fractions, [1.0]])
-        m, interior = fractions.shape[0], self.fractions.shape[0]
+        m = fractions.shape[0]
         offset = np.zeros((count, m))
         offset[:-1] = np.diff(grid)[:, None] * fractions[None, :]  # last stage: every point at s_end
         s = np.minimum(grid[:, None] + offset, grid[-1])
@@ -69,24 +76,28 @@ class SegmentLimitConstraint(LinearConstraint):
         b_acc = d2.reshape(count, m * n)
         tangent = np.maximum(np.abs(d1[:, 1:-1]), _TINY_TANGENT)
         x_max = np.min((self.velocity / tangent) ** 2, axis=2)  # (count, interior)
-        a_vel = 2.0 * offset[:, 1:-1] / x_max
-        b_vel = 1.0 / x_max
-        if self.scale is not None:  # rows / scale <= limit  <=>  rows <= scale * limit
-            a_acc, b_acc = a_acc / self.scale[:, None], b_acc / self.scale[:, None]
-            a_vel, b_vel = a_vel / self.scale[:, None] ** 2, b_vel / self.scale[:, None] ** 2
-        a = np.hstack([a_acc, a_vel])
-        b = np.hstack([b_acc, b_vel])
-        rows = m * n
-        F = np.zeros((2 * rows + interior, rows + interior))
-        F[:rows, :rows] = np.eye(rows)
-        F[rows : 2 * rows, :rows] = -np.eye(rows)
-        F[2 * rows :, rows:] = np.eye(interior)
-        g = np.concatenate([np.tile(self.acceleration, m), np.tile(self.acceleration, m), np.ones(interior)])
+        limit = np.broadcast_to(np.tile(self.acceleration, m), a_acc.shape)
+        if self.scale is not None:  # rows <= scale * limit
+            limit = limit * self.scale[:, None]
+            x_max = x_max * self.scale[:, None] ** 2
+        # rows a u + b x <= bound, each divided by its largest coefficient (module notes: seidel's LP needs rows of
+        # unit size); toppra's c term carries the per-stage bound, since F and g are the same at every stage
+        a = np.hstack([a_acc, -a_acc, 2.0 * offset[:, 1:-1]])
+        b = np.hstack([b_acc, -b_acc, np.ones_like(x_max)])
+        bound = np.hstack([limit, limit, x_max])
+        size = np.maximum(np.abs(a), np.abs(b))
+        usable = size * _VARIABLE_RANGE > bound  # else the row cannot bind for |u|, |x| <= seidel's variable range
+        size = np.where(usable, size, 1.0)
+        a = np.where(usable, a / size, 0.0)
+        b = np.where(usable, b / size, 0.0)
+        c = np.where(usable, 1.0 - bound / size, 0.0)  # row + c <= 1  <=>  (a u + b x) / size <= bound / size
+        F = np.eye(a.shape[1])
+        g = np.ones(a.shape[1])
         x_grid = np.min((self.velocity / np.maximum(np.abs(d1[:, 0]), _TINY_TANGENT)) ** 2, axis=1)
         if self.scale is not None:
             x_grid = x_grid * self.scale**2
         xbound = np.column_stack([np.zeros(count), x_grid])
-        return a, b, np.zeros_like(a), F, g, None, xbound
+        return a, b, c, F, g, None, xbound
 
 
 class PathJerkSpeedConstraint(LinearConstraint):

@@ -61,12 +61,12 @@ from taplan.timing._polynomial import (
     compose_quadratic,
     concatenated,
     max_abs_derivative,
-    position_range,
-    sliced,
+    near_cubic_bounds,
+    sliced_pieces,
     time_scaled,
 )
 from taplan.timing.path import Path
-from taplan.timing.straight import state_to_state
+from taplan.timing.straight import state_to_state_pieces
 from taplan.timing.toppra_retime import (
     DEFAULT_POINTS_PER_SEGMENT,
     LIMIT_MARGIN,
@@ -340,7 +340,7 @@ def _joint_filter(
         deviation = _closest_approach(filtered, interior, passing, width)
         worst = float(deviation.max(initial=0.0))
         if worst <= max_deviation:
-            trimmed = _ruckig_ends(filtered, width, limits, interior, passing, max_deviation)
+            trimmed = _ruckig_ends(filtered, width, limits, interior, passing, deviation, max_deviation)
             if trimmed is not None:
                 return JerkLimitedResult(trimmed[0], topp_duration, width, c, "joint", trimmed[1])
             return JerkLimitedResult(filtered, topp_duration, width, c, "joint", worst)
@@ -356,11 +356,13 @@ def _ruckig_ends(
     limits: JointLimits,
     interior: np.ndarray,
     passing: np.ndarray,
+    deviation: np.ndarray,
     max_deviation: float,
 ) -> tuple[Trajectory, float] | None:
     """The filtered trajectory with its first and last window replaced by ruckig's time-optimal motions from rest to
     the filtered state at ``width`` and from the state at ``T - width`` to rest, or None when that is not shorter,
-    not inside every limit (exact) or cuts an interior waypoint by more than ``max_deviation``.
+    not inside every limit (exact) or cuts an interior waypoint by more than ``max_deviation``. ``deviation`` is
+    the filtered trajectory's distance from each interior waypoint (unchanged where the windows do not reach).
 
     In its first window the moving average ramps the acceleration from 0 with at most half the jerk limit (the
     window holds rest and motion, not a full ±a swing), and so in its last: ruckig does it with the full jerk,
@@ -369,31 +371,36 @@ def _ruckig_ends(
     end = filtered.duration - width
     if end <= width:
         return None
-    states = [tuple(filtered(t, k) for k in range(3)) for t in (width, end)]
+    at = [filtered(np.array([0.0, width, end, filtered.duration]), k) for k in range(3)]  # (4, n) per order
+    states = [tuple(at[k][i] for k in range(3)) for i in (1, 2)]
     zero = np.zeros(limits.size)
-    q0, q1 = filtered(0.0), filtered(filtered.duration)
+    q0, q1 = at[0][0], at[0][3]
     inside = limits.replace(  # ruckig's pieces reach its limits up to rounding (~1e-12): ask for a hair less
         velocity=limits.velocity * (1 - RUCKIG_MARGIN),
         acceleration=limits.acceleration * (1 - RUCKIG_MARGIN),
         jerk=limits.jerk * (1 - RUCKIG_MARGIN),
     )
     try:
-        head = state_to_state((q0, zero, zero), states[0], inside)
-        tail = state_to_state(states[1], (q1, zero, zero), inside)
+        head = state_to_state_pieces((q0, zero, zero), states[0], inside)
+        tail = state_to_state_pieces(states[1], (q1, zero, zero), inside)
     except TimingError:
         return None
-    if head.duration + tail.duration >= 2 * width - 1e-9:
+    head_duration, tail_duration = float(head[0][-1]), float(tail[0][-1])
+    if head_duration + tail_duration >= 2 * width - 1e-9:
         return None
-    for piece in (head, tail):
-        low, high = position_range(piece)
-        if np.any(low < limits.lower) or np.any(high > limits.upper):
+    bounds = np.stack([limits.velocity, limits.acceleration, limits.jerk])
+    for piece in (head, tail):  # cubics plus ruckig's 1e-12 end correction: closed-form peaks and a bound of the rest
+        low, high, peaks = near_cubic_bounds(*piece)
+        if np.any(low < limits.lower) or np.any(high > limits.upper) or np.any(peaks > bounds):
             return None
-        peaks = [max_abs_derivative(piece, order).max(axis=0) for order in (1, 2, 3)]
-        bounds = (limits.velocity, limits.acceleration, limits.jerk)
-        if any(np.any(p > b) for p, b in zip(peaks, bounds, strict=True)):
-            return None
-    out = concatenated([head, sliced(filtered, width, end), tail])
-    deviation = _closest_approach(out, interior, passing - (width - head.duration), width)
+    out = concatenated([head, sliced_pieces(filtered, width, end), tail], limits.names)
+    # only the waypoints whose search window (_closest_approach: -0.5 to 1.5 widths, refined by at most a tenth
+    # more) reaches into a replaced window can move
+    near_ends = (passing - 0.6 * width < width) | (passing + 1.6 * width > end)
+    deviation = deviation.copy()
+    deviation[near_ends] = _closest_approach(
+        out, interior[near_ends], passing[near_ends] - (width - head_duration), width
+    )
     worst = float(deviation.max(initial=0.0))
     if worst > max_deviation:
         return None

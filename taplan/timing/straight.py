@@ -22,7 +22,7 @@ from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.trajectory import Trajectory
 
-__all__ = ["straight_line", "state_to_state"]
+__all__ = ["straight_line", "state_to_state", "state_to_state_pieces"]
 
 _SWITCH_TOL = 1e-9  # [s] phase switches closer than this are one breakpoint
 
@@ -65,19 +65,41 @@ def state_to_state(
         InvalidInputError: malformed states. TimingError: ruckig found no trajectory, or its pieces do not meet the
             goal state (1e-9).
     """
+    return Trajectory.from_polynomials(*state_to_state_pieces(start, goal, limits), limits.names)
+
+
+def state_to_state_pieces(
+    start: tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike],
+    goal: tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike],
+    limits: JointLimits,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`state_to_state` as ``(times (N,) from 0, coefficients (N-1, 6, n))`` without building a
+    :class:`Trajectory` (``jerk_limited`` splices two of these into one trajectory per path)."""
     n = len(limits.names)
     a = tuple(as_vector(x, f"start[{i}]", n) for i, x in enumerate(start))
     b = tuple(as_vector(x, f"goal[{i}]", n) for i, x in enumerate(goal))
-    trajectory = _ruckig_motion(a, b, limits, ruckig.Synchronization.Time)
+    times, coefficients = _ruckig_pieces(a, b, limits, ruckig.Synchronization.Time)
+    last, h = coefficients[-1], times[-1] - times[-2]
+    end = (  # position, velocity and acceleration at the end of the last piece
+        np.polynomial.polynomial.polyval(h, last),
+        np.polynomial.polynomial.polyval(h, last[1:] * np.arange(1, 6)[:, None]),
+        np.polynomial.polynomial.polyval(h, last[2:] * (np.arange(2, 6) * np.arange(1, 5))[:, None]),
+    )
     for k in range(3):
-        if not np.allclose(trajectory(trajectory.duration, k), b[k], atol=1e-9 * max(1.0, float(np.abs(b[k]).max()))):
+        if not np.allclose(end[k], b[k], atol=1e-9 * max(1.0, float(np.abs(b[k]).max()))):
             raise TimingError("ruckig's state-to-state motion does not end at the goal state")
-    return trajectory
+    return times, coefficients
 
 
 def _ruckig_motion(
     start: tuple[np.ndarray, ...], goal: tuple[np.ndarray, ...], limits: JointLimits, synchronization: object
 ) -> Trajectory:
+    return Trajectory.from_polynomials(*_ruckig_pieces(start, goal, limits, synchronization), limits.names)
+
+
+def _ruckig_pieces(
+    start: tuple[np.ndarray, ...], goal: tuple[np.ndarray, ...], limits: JointLimits, synchronization: object
+) -> tuple[np.ndarray, np.ndarray]:
     n = len(limits.names)
     generator = ruckig.Ruckig(n)
     request = ruckig.InputParameter(n)
@@ -117,8 +139,7 @@ def _ruckig_motion(
         (6 * e0 - 3 * e1 * total + 0.5 * e2 * total**2) / total**5,
     ]
     start_times = times[:-1] - times[0]
-    for k, t0 in enumerate(start_times):  # the correction re-expanded about each piece's start
-        for power, c in zip((3, 4, 5), top, strict=True):
-            for j in range(power + 1):
-                coefficients[k, j] += comb(power, j) * t0 ** (power - j) * c
-    return Trajectory.from_polynomials(times - times[0], coefficients, limits.names)
+    for power, c in zip((3, 4, 5), top, strict=True):  # the correction re-expanded about each piece's start
+        for j in range(power + 1):
+            coefficients[:, j] += comb(power, j) * (start_times ** (power - j))[:, None] * c[None, :]
+    return times - times[0], coefficients
