@@ -105,6 +105,10 @@ def test_plan_times_a_bag_in_one_command(tmp_path, teleavatar, capsys) -> None:
     trajectory = taplan.Trajectory.load(out)
     assert trajectory.joint_names == tuple(names)
     assert limit_usage(trajectory, limits).within(LIMIT_TOL, jerk=True)
+    # the plan file passes taplan check on its own, and through the JTC controller model
+    assert main(["check", str(out), "--limits", "planning", "--no-png"]) == 0
+    assert main(["check", str(out), "--limits", "planning", "--controller", "jtc", "--no-png"]) == 0
+    assert capsys.readouterr().out.count(": PASS") == 2
 
 
 def test_recording_csv_round_trip(tmp_path, arm) -> None:
@@ -116,7 +120,7 @@ def test_recording_csv_round_trip(tmp_path, arm) -> None:
     np.testing.assert_allclose(times, t, atol=1e-12)
     np.testing.assert_allclose(positions, q, atol=1e-15)
     with pytest.raises(InvalidInputError, match="first column"):
-        load_recording(str(tmp_path.joinpath("x.csv").with_suffix(".csv")) if False else str(_no_time(tmp_path)))
+        load_recording(str(_no_time(tmp_path)))
 
 
 def _no_time(tmp_path):
