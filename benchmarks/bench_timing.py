@@ -445,7 +445,8 @@ def markdown(results: dict[str, Any], seeds: int) -> str:
         "`TOPPRA([JointVelocityConstraint, JointAccelerationConstraint], path)` with its default gridpoints and "
         "`ParametrizeSpline` (its peaks are sampled at 1 kHz); `retime` = `taplan.timing.retime`; `jerk_limited` = "
         "`taplan.timing.jerk_limited` (default: TOPP-RA filtered in joint space by an exact moving average of width "
-        "2a/j, interior waypoints within `max_deviation` 0.05 rad); `method='path'`: the filter of the path timing "
+        "2a/j, its first and last window replaced by ruckig's time-optimal start and stop, interior waypoints within "
+        "`max_deviation` 0.05 rad); `method='path'`: the filter of the path timing "
         "(exact waypoints; only up to 50 waypoints, seconds per path beyond). Peaks of retime and jerk_limited are "
         "exact (every polynomial piece's extrema, `taplan.timing.limit_usage`), not sampled. Duration ratios are to "
         "the TOPP-RA optimum of the same path under the same limits (`JerkLimitedResult.topp_duration`).",

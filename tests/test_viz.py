@@ -459,3 +459,42 @@ def test_perceived_occupancy_is_drawn_voxel_by_voxel_and_follows_the_scene(telea
         scene.remove("seen")
         v.set_time(0.6)
         assert "/scene/seen" not in v.nodes()
+
+
+def test_show_serves_a_motion_plan_in_its_scene_on_localhost(teleavatar, capsys) -> None:
+    # item 2's Python source: taplan.viz.show(plan, scene) with a MotionPlan, the scene as the last positional
+    # argument; outside Jupyter it prints the URL, on 127.0.0.1 unless told otherwise
+    from taplan.planning import plan_motion
+
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    goal = teleavatar.home.copy()
+    goal[teleavatar.group("right").indices] += np.array([-0.3, -0.2, 0.1, -0.3, 0.0, 0.2, 0.0])
+    plan = plan_motion(teleavatar, teleavatar.home, goal, scene)
+    viewer = viz.show(plan, scene, play=True)
+    try:
+        assert f"taplan.viz: open {viewer.url}" in capsys.readouterr().out
+        assert viewer.url.startswith("http://127.0.0.1:")
+        assert viewer.end == pytest.approx(plan.trajectory.duration)
+        assert {"/scene/table", "/paths/plan/right_ee", f"/robots/plan/{teleavatar.joint_names[0]}"} <= set(
+            viewer.nodes()
+        )
+        with urllib.request.urlopen(viewer.url, timeout=10) as page:  # viser's client is served
+            assert b"<html" in page.read(2000)
+        deadline = time.monotonic() + 20.0
+        while viewer.time <= 0.0 and time.monotonic() < deadline:
+            time.sleep(0.02)  # play=True: the server's thread plays by itself
+        assert viewer.playing and viewer.time > 0.0
+        viewer.pause()
+        viewer.set_time(viewer.end)
+        end = viewer.world_pose("/robots/plan/r_joint7")
+        np.testing.assert_allclose(end[:3, 3], _joint_position(teleavatar, plan.trajectory(viewer.end), "r_joint7"))
+    finally:
+        with contextlib.redirect_stdout(io.StringIO()):
+            viewer.close()
+
+
+def _joint_position(robot: taplan.Robot, q: np.ndarray, joint: str) -> np.ndarray:
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    return data.oMi[robot.model.getJointId(joint)].translation
