@@ -196,11 +196,11 @@ def _singular_value(robot: taplan.Robot, q: np.ndarray, side: str) -> float:
 
 
 def cartesian_sweep(count: int) -> dict[str, Any]:
-    """Cartesian lines from starts on and near the position bounds (``taplan.timing.cartesian_offset``, both
+    """Cartesian lines from starts on and near the position bounds (``taplan.planning.cartesian.cartesian_offset``, both
     timings): refusals by the timing (TimingError), lines the IK finds blocked (InfeasibleError: a joint limit or
     the workspace), and exact limit violations of the lines that were planned."""
     logging.getLogger("toppra").setLevel(logging.ERROR)
-    from taplan.timing import cartesian_offset
+    from taplan.planning.cartesian import cartesian_offset
 
     robot = taplan.Robot.teleavatar()
     limits = robot.planning_limits

@@ -200,6 +200,7 @@ def test_cartesian_line_respects_a_scene(teleavatar) -> None:
     """With a scene the line is certified collision-free, or refused with the pair and the distance in mm."""
     from taplan.errors import CollisionError, PlanningError
     from taplan.scene import Box, CollisionWorld, Scene
+
     q = teleavatar.home
     hand = teleavatar.frame_pose(q, "right_ee")[:3, 3]
     below = Scene()
