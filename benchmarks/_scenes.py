@@ -143,13 +143,14 @@ def _sample(
     return None
 
 
-def problems(count: int, seed: int = 0) -> list[Problem]:
-    """``count`` problems spread over the families (seeded)."""
+def problems(count: int, seed: int = 0, families: tuple[str, ...] = FAMILIES) -> list[Problem]:
+    """``count`` problems spread over ``families`` in turn (seeded; the same seed and families give the same
+    problems)."""
     robot = taplan.Robot.teleavatar()
     rng = np.random.default_rng(seed)
     out: list[Problem] = []
     while len(out) < count:
-        family = FAMILIES[len(out) % len(FAMILIES)]  # every family in turn (a failed draw retries it)
+        family = families[len(out) % len(families)]  # every family in turn (a failed draw retries it)
         scene = make_scene(family, rng)
         world = CollisionWorld(robot, scene)
         arms = (("left",), ("right",), ("left", "right"))[int(rng.integers(3))]

@@ -150,13 +150,13 @@ def taplan_pipeline(
     }
 
 
-def run(count: int, seed: int) -> dict[str, Any]:
+def run(count: int, seed: int, families: tuple[str, ...] = FAMILIES) -> dict[str, Any]:
     logging.getLogger("toppra").setLevel(logging.ERROR)
     from ompl import util as ou
 
     ou.setLogLevel(ou.LOG_WARN)
     robot = taplan.Robot.teleavatar()
-    suite = problems(count, seed)
+    suite = problems(count, seed, families)
     rows = []
     for problem in suite:
         world = CollisionWorld(robot, problem.scene)
@@ -169,6 +169,7 @@ def run(count: int, seed: int) -> dict[str, Any]:
         "rows": rows,
         "count": count,
         "seed": seed,
+        "families": list(families),
         "max_time": MAX_TIME,
         "tolerance": BUDGET_TOLERANCE,
         "travel": TRAVEL,
@@ -323,9 +324,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--problems", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quick", action="store_true", help="20 problems")
+    parser.add_argument("--families", default=",".join(FAMILIES), help="comma-separated, of " + ",".join(FAMILIES))
     parser.add_argument("--no-save", action="store_true")
     args = parser.parse_args(argv)
-    results = run(20 if args.quick else args.problems, args.seed)
+    families = tuple(f for f in args.families.split(",") if f)
+    unknown = sorted(set(families) - set(FAMILIES))
+    if unknown or not families:
+        parser.error(f"--families: unknown {unknown or 'empty'}; valid: {', '.join(FAMILIES)}")
+    results = run(20 if args.quick else args.problems, args.seed, families)
     results["quick"] = args.quick
     text = markdown(results)
     print(text)

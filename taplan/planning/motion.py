@@ -24,7 +24,7 @@
    retimed (with exact waypoints at the last attempt); a plan that fails is never returned: PlanningError.
 
 ``max_time`` bounds the whole call: the goal IK stops seeding after half of it, the path search leaves
-``FINISH_SHARE`` of it (0.05–1 s) for timing and verification, a sampled path is smoothed only when the time left
+``FINISH_SHARE`` of it (0.05–2 s) for timing and verification, a sampled path is smoothed only when the time left
 covers 2.5 times what its timing and verification took (else the certified unsmoothed plan, with a note), and every
 stage checks the deadline between its indivisible steps: the call ends within ``max_time + BUDGET_TOLERANCE``.
 """
@@ -43,7 +43,7 @@ from taplan.errors import InvalidInputError, PlanningError, TimingError
 from taplan.limits import JointLimits
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
 from taplan.planning.optimize import optimize_path
-from taplan.planning.rrt import rrt_connect, shortcut
+from taplan.planning.rrt import rrt_connect_shrinking
 from taplan.planning.verify import MIN_CERTIFIED, SegmentCheck, Verification, check_segment, verify_trajectory
 from taplan.robot import Robot
 from taplan.scene.scene import Scene
@@ -58,8 +58,10 @@ PERTURBED_SEEDS = 2  # optimisation seeds through a random collision-free midpoi
 DENSIFY_STEP = 0.1  # [rad] longest path segment handed to the timing (max-norm)
 BUDGET_TOLERANCE = 0.2  # [s] documented overrun of max_time: one indivisible step (an IK solve, a QP, a timing)
 IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
-FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.3, 0.05, 1.0  # [-, s, s] the path search leaves this for timing + verify
+FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path search leaves this for timing + verify
 SMOOTH_HEADROOM, SMOOTH_MIN = 2.5, 0.05  # smoothing runs when the time left exceeds 2.5x the finish + 0.05 s
+OPTIMIZE_SHARE = 0.25  # of the search time, for the optimiser from the straight line when the sampler follows it
+MARGIN_SHARES = 0.5  # of the time left, for the sampler at each margin but the last (the floor gets the rest)
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,10 @@ class PlanReport:
         approaches: The bent ends: a start or goal closer than the margin (but clear of the floor) is left or
             approached along a short certified segment (:class:`~taplan.planning.ends.Approach`: where, how close,
             what is certified).
-        notes: What the planner gave up to hold the time budget (e.g. the smoothing of a sampled path).
+        margin: The clearance the path keeps at its configurations [m]: ``margin``, or less when only the sampler
+            found a path, at a lower clearance, through a narrow passage (at least the floor; ``notes`` says so).
+        notes: What the planner gave up: the smoothing of a sampled path to hold the time budget, the margin in a
+            narrow passage.
         elapsed: Wall time of the whole call [s].
     """
 
@@ -99,6 +104,7 @@ class PlanReport:
     goal: np.ndarray = field(repr=False)
     smoothed: bool = False
     approaches: tuple[Approach, ...] = ()
+    margin: float = DEFAULT_MARGIN
     notes: tuple[str, ...] = ()
     elapsed: float = 0.0
 
@@ -121,6 +127,15 @@ def _densify(path: list[np.ndarray], step: float) -> np.ndarray:
     return np.array(out)
 
 
+def _margins(margin: float, floor: float) -> tuple[float, ...]:
+    """The sampler's clearances, widest first: the path margin, then halfway to the floor, then the floor."""
+    out = [margin]
+    for m in (max(margin / 2, floor), floor):
+        if m < out[-1] - 1e-9:
+            out.append(m)
+    return tuple(out)
+
+
 def _find_path(
     world: CollisionWorld,
     q0: np.ndarray,
@@ -128,41 +143,59 @@ def _find_path(
     active: np.ndarray,
     limits: JointLimits,
     margin: float,
+    floor: float,
     stages: tuple[str, ...],
     deadline: float,
     rng: np.random.Generator,
     times: dict[str, float],
-) -> tuple[str, list[np.ndarray], SegmentCheck | None] | None:
-    """(stage, path, the straight segment's certificate or None): the first stage in ``stages`` that finds a
-    certified path before ``deadline`` (``time.perf_counter()``), else None; a sampled path is shortcut but not yet
-    smoothed."""
-    for stage in stages:
+) -> tuple[str, list[np.ndarray], SegmentCheck | None, float] | None:
+    """(stage, path, the straight segment's certificate or None, the margin the path keeps): the first stage in
+    ``stages`` that finds a certified path before ``deadline`` (``time.perf_counter()``), else None; a sampled path
+    is shortcut but not yet smoothed.
+
+    The optimiser gets ``OPTIMIZE_SHARE`` of the search time when the sampler follows it. The sampler tries the
+    margins of :func:`_margins` in turn (``MARGIN_SHARES`` of the time left each, the floor all that remains): a
+    passage narrower than the arm plus twice the margin is crossed with less clearance rather than not at all."""
+    for index, stage in enumerate(stages):
         clock = time.perf_counter()
         if stage == "straight":
             certificate = check_segment(world, q0, q1, margin)
             times["straight"] += time.perf_counter() - clock
             if certificate.valid:
-                return stage, [q0, q1], certificate
+                return stage, [q0, q1], certificate, margin
         elif stage == "optimization":
-            for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, rng):
-                if time.perf_counter() >= deadline:
+            cap, perturbed = deadline, PERTURBED_SEEDS
+            if "rrt-connect" in stages[index + 1 :]:
+                # the sampler's path through the passage (smoothed later) is a better second seed than a random
+                # midpoint: the straight line only, for a share of the time
+                cap, perturbed = clock + OPTIMIZE_SHARE * max(deadline - clock, 0.0), 0
+            for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, perturbed, rng):
+                if time.perf_counter() >= cap:
                     break
-                result = optimize_path(world, seed_path, active, limits.lower, limits.upper, margin, deadline=deadline)
+                result = optimize_path(world, seed_path, active, limits.lower, limits.upper, margin, deadline=cap)
                 if result is not None:
                     times["optimize"] += time.perf_counter() - clock
-                    return stage, list(result.path), None
+                    return stage, list(result.path), None, margin
             times["optimize"] += time.perf_counter() - clock
         else:
-            remaining = max(deadline - time.perf_counter(), 0.0)
-            found_path = rrt_connect(
-                world, q0, q1, active, limits.lower, limits.upper, margin, max_time=remaining, rng=rng
+            left = max(deadline - time.perf_counter(), 0.0)
+            margins = _margins(margin, floor)
+            sampled = rrt_connect_shrinking(
+                world,
+                q0,
+                q1,
+                active,
+                limits.lower,
+                limits.upper,
+                margins,
+                shares=(MARGIN_SHARES,) * (len(margins) - 1),
+                max_time=left,
+                rng=rng,
             )
-            if found_path is None:
+            if sampled is not None:
                 times["sample"] += time.perf_counter() - clock
-                break
-            path = shortcut(world, found_path, margin, rng=rng, deadline=deadline)
+                return stage, sampled[0], None, sampled[1]
             times["sample"] += time.perf_counter() - clock
-            return stage, path, None
     return None
 
 
@@ -177,12 +210,14 @@ def _optimization_seeds(
     active: np.ndarray,
     limits: JointLimits,
     margin: float,
+    perturbed: int,
     rng: np.random.Generator,
 ) -> list[np.ndarray]:
-    """The straight line, then polylines through random collision-free configurations near its middle."""
+    """The straight line, then ``perturbed`` polylines through random collision-free configurations near its
+    middle."""
     seeds = [np.array([q0, q1])]
     spread = 0.5 * np.maximum(np.abs(q1 - q0)[active], 0.3)  # [rad]
-    for _ in range(PERTURBED_SEEDS):
+    for _ in range(perturbed):
         for _attempt in range(20):
             middle = (q0 + q1) / 2
             middle[active] += rng.uniform(-1.0, 1.0, active.size) * spread
@@ -495,24 +530,29 @@ def plan_motion(
     b = next((p.clear for p in approaches if p.end == "goal"), q1)
     reserve = float(np.clip(FINISH_SHARE * max_time, FINISH_MIN, FINISH_MAX))
     if np.abs(b - a).max() > 1e-12:
-        found = _find_path(world, a, b, active, limits, margin, stages, deadline - reserve, rng, times)
+        found = _find_path(world, a, b, active, limits, margin, floor, stages, deadline - reserve, rng, times)
         if found is None:
             raise PlanningError(
                 f"no collision-free path found within {max_time:g} s (stages: {', '.join(stages)}; "
                 f"{reserve:.2f} s of the budget kept for timing and verification)"
             )
-        stage, path, certificate = found
+        stage, path, certificate, kept = found
     else:
-        stage, path, certificate = "straight", [a, b], None  # both ends retreat to one clear configuration
+        stage, path, certificate, kept = "straight", [a, b], None, margin  # both ends retreat to one clear one
     clock = time.perf_counter()
     timed = _time_and_verify(
-        robot, world, path, approaches, active, limits, q0, q1, margin, max_deviation, deadline, times, certificate
+        robot, world, path, approaches, active, limits, q0, q1, kept, max_deviation, deadline, times, certificate
     )
     finish = time.perf_counter() - clock
     if isinstance(timed, str):
         raise PlanningError(timed)
 
     notes: list[str] = []
+    if kept < margin:
+        notes.append(
+            f"no path that keeps the {margin * 1e3:.1f} mm margin was found in time; this one keeps "
+            f"{kept * 1e3:.2f} mm (edges half, the timed trajectory a quarter)"
+        )
     smoothed = False
     if stage == "rrt-connect":
         # the certified unsmoothed plan is in hand: smoothing must leave room to time and verify its result
@@ -530,7 +570,7 @@ def plan_motion(
                 active,
                 limits.lower,
                 limits.upper,
-                margin,
+                kept,
                 max_iterations=15,
                 deadline=deadline - SMOOTH_HEADROOM / 2 * finish,
             )
@@ -545,7 +585,7 @@ def plan_motion(
                     limits,
                     q0,
                     q1,
-                    margin,
+                    kept,
                     max_deviation,
                     deadline,
                     times,
@@ -572,6 +612,7 @@ def plan_motion(
         waypoints=len(path),
         timing_attempts=timed.attempts,
         smoothed=smoothed,
+        margin=kept,
         goal=q1,
         approaches=tuple(approaches),
         notes=tuple(notes),

