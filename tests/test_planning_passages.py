@@ -8,9 +8,10 @@ import pinocchio as pin
 import pytest
 
 import taplan
-from taplan.planning import plan_motion, rrt_connect
+from taplan.planning import motion, plan_motion, rrt_connect
 from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.motion import _margins
+from taplan.planning.rrt import rrt_connect_shrinking
 from taplan.planning.verify import check_segment
 from taplan.scene import Box, CollisionWorld, Cylinder, HalfSpace, Scene, Sphere
 
@@ -114,22 +115,41 @@ def test_margins_shrink_to_the_floor_and_no_further() -> None:
     assert min(_margins(0.1, 0.003)) == 0.003
 
 
-def test_passage_narrower_than_the_margin_is_crossed_with_less_clearance(robot: taplan.Robot) -> None:
-    """Two boards leave the forearm a slot of about 3 cm on each side: with a 5 cm margin the sampler finds no
-    path, then crosses with a lower clearance; the report says which, and the plan keeps it."""
+def test_sampler_shrinks_its_margin_when_the_widest_is_impossible(robot: taplan.Robot) -> None:
+    """At 20 cm not even the start is clear: the trees grow no further there, the search goes on at 1 cm."""
+    world = _box_on_table(robot)
+    goal = _goal(robot)
+    active = np.array(robot.group("right").indices)
+    limits = robot.planning_limits
+    assert world.min_distance(robot.home)[0] < 0.2
+    found = rrt_connect_shrinking(
+        world, robot.home, goal, active, limits.lower, limits.upper, (0.2, 0.01), shares=(0.2,), max_time=30.0
+    )
+    assert found is not None
+    path, kept = found
+    assert kept == 0.01
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        assert check_segment(world, a, b, kept, points=kept / 2).valid
+
+
+def test_plan_through_a_passage_reports_the_margin_it_kept(
+    robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The plan keeps the sampler's margin (5 mm here, the 20 cm first try being impossible) at its waypoints and a
+    quarter of it along the timed trajectory; the report and a note say so."""
     world = _box_on_table(robot)
     start, goal = robot.home, _goal(robot)
-    margin = 0.05
-    assert world.min_distance(start)[0] < margin or world.min_distance(goal)[0] < margin or True
-    plan = plan_motion(robot, start, goal, world=world, margin=margin, stages=("rrt-connect",), max_time=20.0, seed=0)
-    kept = plan.report.margin
-    assert kept in _margins(margin, 0.0025)
-    if kept < margin:
-        assert any(f"{kept * 1e3:.2f} mm" in note for note in plan.report.notes)
-    for q in plan.path[1:-1]:
-        assert world.min_distance(q)[0] >= kept - 1e-9
+    monkeypatch.setattr(motion, "_margins", lambda margin, floor: (0.2, 0.005))
+    plan = plan_motion(robot, start, goal, world=world, stages=("rrt-connect",), max_time=30.0, seed=0)
+    assert plan.report.stage == "rrt-connect" and plan.report.margin == 0.005
+    assert any("keeps 5.00 mm" in note for note in plan.report.notes)
+    for q in plan.path:
+        assert world.min_distance(q)[0] >= 0.005 - 1e-9
     index = robot.indices(plan.trajectory.joint_names)
+    lowest = np.inf
     for t in np.linspace(0, plan.trajectory.duration, 300):
         q = start.copy()
         q[index] = plan.trajectory(t)
-        assert world.min_distance(q)[0] >= min(kept / 4, world.min_distance(goal)[0]) - 1e-9
+        lowest = min(lowest, world.min_distance(q)[0])
+    assert lowest >= 0.005 / 4 - 1e-9
+    assert plan.report.min_clearance >= 0.005 / 4 - 1e-9

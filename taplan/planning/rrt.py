@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from taplan.planning.compiled_check import ClearanceCheck
-from taplan.planning.verify import check_segment
+from taplan.planning.verify import check_segment, check_segments
 from taplan.scene.world import CollisionWorld
 
 __all__ = ["rrt_connect", "rrt_connect_shrinking", "shortcut", "certify_path"]
@@ -125,22 +125,21 @@ def certify_path(
     world: CollisionWorld, path: list[np.ndarray], margin: float, deadline: float = float("inf")
 ) -> list[np.ndarray] | None:
     """``path`` (full configurations) with every edge certified to keep ``margin / 2`` (its points evaluated at
-    ``margin / 2`` too: the sampler's test already kept ``margin`` at its states); a refused edge is split in
-    halves up to ``SPLITS`` deep. None when an edge still fails or ``deadline`` passes."""
-    out = [path[0]]
-    pending = [(a, b, 0) for a, b in zip(path[:-1], path[1:], strict=True)][::-1]
-    while pending:
+    ``margin / 2`` too: the sampler's test already kept ``margin`` at its states), all edges in one batch; refused
+    edges are split in halves up to ``SPLITS`` deep. None when an edge still fails or ``deadline`` passes."""
+    edges = [(a, b) for a, b in zip(path[:-1], path[1:], strict=True)]
+    for _ in range(SPLITS + 1):
         if time.perf_counter() >= deadline:
             return None
-        a, b, depth = pending.pop()
-        if check_segment(world, a, b, margin, points=margin / 2).valid:
-            out.append(b)
-        elif depth < SPLITS:
-            middle = (a + b) / 2
-            pending += [(middle, b, depth + 1), (a, middle, depth + 1)]
-        else:
-            return None
-    return out
+        starts, ends = np.array([a for a, _ in edges]), np.array([b for _, b in edges])
+        checks = check_segments(world, starts, ends, margin, points=margin / 2, deadline=deadline)
+        if all(c.valid for c in checks):
+            return [edges[0][0]] + [b for _, b in edges]
+        refined = []
+        for (a, b), c in zip(edges, checks, strict=True):
+            refined += [(a, (a + b) / 2), ((a + b) / 2, b)] if not c.valid else [(a, b)]
+        edges = refined
+    return None
 
 
 def rrt_connect(
