@@ -143,6 +143,15 @@ def _sample(
     return None
 
 
+def _held_arm_clear(robot: taplan.Robot, world: CollisionWorld, arms: tuple[str, ...]) -> bool:
+    """Whether the arm that does not move (held at home) and what it carries keep ``1.5 MARGIN`` from everything."""
+    held = [g for g in robot.groups if g not in arms]
+    names = {b.name for b in world.bodies if b.group in held}
+    names |= {name for name in world.scene.attached if any(name.startswith(g) for g in held)}
+    d = world.distances(robot.home, jacobian=False)
+    return all(dist >= MARGIN * 1.5 for (a, b), dist in zip(d.pairs, d.distance, strict=True) if {a, b} & names)
+
+
 def problems(count: int, seed: int = 0, families: tuple[str, ...] = FAMILIES) -> list[Problem]:
     """``count`` problems spread over ``families`` in turn (seeded; the same seed and families give the same
     problems)."""
@@ -154,6 +163,8 @@ def problems(count: int, seed: int = 0, families: tuple[str, ...] = FAMILIES) ->
         scene = make_scene(family, rng)
         world = CollisionWorld(robot, scene)
         arms = (("left",), ("right",), ("left", "right"))[int(rng.integers(3))]
+        if not _held_arm_clear(robot, world, arms):
+            arms = ("left", "right")  # the other arm at home is in the obstacle (a wall across the workspace)
         hard = len(out) % 2 == 0
         for _ in range(20):
             start = _sample(robot, world, arms, rng)
