@@ -13,9 +13,12 @@
    None: :class:`~taplan.errors.PlanningError` naming the target.
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
-   straight line, then from polylines through perturbed midpoints (``"optimization"``); RRT-Connect
-   (:mod:`~taplan.planning.rrt`) with shortcutting, then the optimiser as its smoother (``"rrt-connect"``). Every
-   edge keeps at least ``margin / 2`` by conservative advancement (:mod:`~taplan.planning.verify`).
+   straight line, then from polylines through perturbed midpoints (``"optimization"``; the straight line only, for
+   a quarter of the search time, when the sampler follows); RRT-Connect (:mod:`~taplan.planning.rrt`, exploring
+   with a compiled clearance test) with shortcutting, then the optimiser as its smoother (``"rrt-connect"``); in
+   a passage too narrow for the margin the sampler's margin shrinks to half, then to the floor
+   (``report.margin``). Every edge keeps at least half its margin by conservative advancement
+   (:mod:`~taplan.planning.verify`).
 4. **Timing**: a straight segment gets the time-optimal jerk-limited motion along it
    (:func:`~taplan.timing.straight.straight_line`, ruckig); a polyline :func:`~taplan.timing.jerk_limited`
    (densified so that its spline stays near the segments), interior corners cut by at most ``max_deviation``.
