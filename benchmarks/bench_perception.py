@@ -285,16 +285,16 @@ def markdown(results: dict[str, Any], note: str) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--problems", type=int, default=100, help="planning problems (default 100)")
     parser.add_argument("--quick", action="store_true", help="10 problems, fewer repeats")
     parser.add_argument("--skip-planning", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     robot = taplan.Robot.teleavatar()
     repeats = 10 if args.quick else 40
-    results: dict[str, Any] = {"load_average": os.getloadavg()[0]}
+    results: dict[str, Any] = {"load_average": os.getloadavg()[0], "quick": args.quick}
     results["integration"] = bench_integration(robot, repeats)
     results["distance"] = bench_distance(robot, repeats * 5)
     note = f"Load average {results['load_average']:.1f} on {os.cpu_count()} cores at the start."
