@@ -316,6 +316,29 @@ def ldlj(velocity: npt.ArrayLike, jerk: npt.ArrayLike, rate: float) -> float:
 
 
 # --------------------------------------------------------------------------------------------------- check
+@dataclass
+class _Series:
+    """What the joint checks read, from a plan or from a stream: samples ``t`` (m,), ``q``/``v``/``a``/``j`` (m, n),
+    the largest velocity change between samples ``dv`` and across waypoints ``dv_wp`` (n,), the peak velocity, the
+    sample period, and the report's labels."""
+
+    names: tuple[str, ...]
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    j: np.ndarray
+    dv: np.ndarray
+    dv_wp: np.ndarray
+    v_peak: np.ndarray
+    period: float
+    label: str
+    source: str
+    timing: TimingCheck | None = None
+    dropped: tuple[int, ...] = ()
+    notes: tuple[str, ...] = ()
+
+
 def check(
     subject: Replay | JointStateSamples | Trajectory,
     limits: JointLimits | None = None,
@@ -344,133 +367,149 @@ def check(
         The :class:`Report`.
     """
     th = thresholds or Thresholds()
-    dropped: tuple[int, ...] = ()
-    notes: list[str] = []
     if isinstance(subject, Trajectory):
-        grid_rate = as_positive(1000.0 if rate is None else rate, "rate")
-        names = subject.joint_names
-        t = np.union1d(subject.sample_times(grid_rate), subject.times)
-        q, v, a, j = (subject(t, k) for k in range(4))
-        wp = subject.times if waypoint_times is None else _times(waypoint_times)
-        # |Δv| across each knot from the polynomials on either side
-        eps = 1e-9
-        inner = subject.times[1:-1]
-        dv_wp = (
-            np.abs(subject(inner + eps, 1) - subject(inner - eps, 1)).max(axis=0)
-            if inner.size
-            else np.zeros(len(names))
-        )
-        dv = np.abs(np.diff(v, axis=0)).max(axis=0)
-        dv = np.maximum(dv, dv_wp)
-        period = 1.0 / grid_rate
-        timing = None
-        label = name or repr(subject)
-        src = "trajectory"
-        stream_rate = grid_rate
-        v_peak = np.abs(v).max(axis=0)
+        series = _plan_series(subject, rate, waypoint_times, name)
+    elif isinstance(subject, (Replay, JointStateSamples)):
+        series = _stream_series(subject, rate, waypoint_times, source, name, th)
     else:
-        if isinstance(subject, Replay):
-            if source == "samples":
-                if subject.samples is None:
-                    raise InvalidInputError("source", source, "'updates' (this replay has no joint_states samples)")
-                s = subject.samples
-                t, q, v_rep, a_rep = s.times, s.positions, s.velocities, None
-                stream_rate = s.rate if rate is None else as_positive(rate, "rate")
-            elif source == "updates":
-                t = np.concatenate([[0.0], subject.times])
-                q = np.vstack([subject.initial_positions, subject.positions])
-                v_rep = np.vstack([subject.initial_velocities, subject.velocities])
-                a_rep = None
-                if subject.accelerations is not None:
-                    a_rep = np.vstack([np.zeros(subject.n_joints), subject.accelerations])
-                stream_rate = subject.rate if rate is None else as_positive(rate, "rate")
-            else:
-                raise InvalidInputError("source", source, "'updates' or 'samples'")
-            names = subject.joint_names
-            dropped = tuple(subject.dropped)
-            wp = subject.waypoint_times if waypoint_times is None else _times(waypoint_times)
-            label = name or subject.controller
-            notes += list(subject.events[:5])
-        elif isinstance(subject, JointStateSamples):
-            t, q, v_rep, a_rep = subject.times, subject.positions, subject.velocities, None
-            stream_rate = subject.rate if rate is None else as_positive(rate, "rate")
-            names = subject.joint_names or tuple(f"joint{i}" for i in range(q.shape[1]))
-            wp = np.zeros(0) if waypoint_times is None else _times(waypoint_times)
-            label = name or "joint_states"
-        else:
-            raise InvalidInputError("subject", type(subject).__name__, "a Trajectory, Replay or JointStateSamples")
-        src = source if isinstance(subject, Replay) else "samples"
-        period = 1.0 / stream_rate
-        if len(t) < 2:
-            raise InvalidInputError("subject", f"{len(t)} samples", "a stream of at least 2 samples")
-        if np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
-            raise InvalidInputError("times", "non-monotonic or non-finite sample times", "non-decreasing times")
-        if not np.all(np.isfinite(q)):
-            raise InvalidInputError("positions", "NaN or inf", "finite positions")
-        stamps = subject.times if isinstance(subject, Replay) and src == "updates" else t
-        timing = _timing(np.diff(stamps), period, th) if len(stamps) >= 2 else None
-        # updates closer than a quarter period are merged (last value wins): a near-duplicate update is not a
-        # sample a robot can follow, and differences over nanoseconds would swamp the derivatives
-        keep = np.append(np.diff(t) > 0.25 * period, True)
-        t, q = t[keep], q[keep]
-        v_rep = v_rep[keep]
-        if len(t) < 2:  # nothing moved in time (e.g. every waypoint dropped): hold the state one period
-            t = np.append(t, t[-1] + period)
-            q = np.vstack([q, q[-1:]])
-            v_rep = np.vstack([v_rep, np.zeros_like(v_rep[-1:])])
-            if a_rep is not None:
-                a_rep = np.vstack([a_rep[keep], np.zeros_like(a_rep[-1:])])
-                keep = np.ones(len(t), dtype=bool)
-        h = np.diff(t)[:, None]
-        v_fd = np.vstack([np.zeros((1, q.shape[1])), np.diff(q, axis=0) / h])
-        v = np.where(np.isfinite(v_rep), v_rep, v_fd)
-        a = a_rep[keep] if a_rep is not None else np.vstack([np.zeros((1, q.shape[1])), np.diff(v, axis=0) / h])
-        j = np.vstack([np.zeros((1, q.shape[1])), np.diff(a, axis=0) / h])
-        v_peak = np.maximum(np.abs(v).max(axis=0), np.abs(v_fd).max(axis=0))
-        dv_all = np.abs(np.diff(v, axis=0))
-        dv = dv_all.max(axis=0)
-        dv_wp = np.zeros(q.shape[1])
-        if wp.size:
-            k = np.clip(np.searchsorted(t, wp - 1e-12), 1, len(t) - 1)
-            dv_wp = np.maximum(dv_all[k - 1], dv_all[np.minimum(k, len(dv_all) - 1)]).max(axis=0)
-
-    lim = _limits(limits, names)
-    step_limit = (
-        lim.acceleration * period * (1 + th.acceleration_tolerance)
-        if th.velocity_step is None
-        else np.broadcast_to(np.asarray(th.velocity_step, dtype=float), (len(names),))
+        raise InvalidInputError("subject", type(subject).__name__, "a Trajectory, Replay or JointStateSamples")
+    joints = _joint_checks(series, _limits(limits, series.names), th)
+    return Report(
+        subject=series.label,
+        source=series.source,
+        rate=1.0 / series.period,
+        duration=float(series.t[-1] - series.t[0]),
+        joints=tuple(joints),
+        timing=series.timing,
+        thresholds=th,
+        dropped_waypoints=series.dropped,
+        notes=series.notes,
     )
-    # smoothness on a uniform grid
-    t_u = np.arange(t[0], t[-1] + 1e-12, period)
+
+
+def _plan_series(
+    subject: Trajectory, rate: float | None, waypoint_times: npt.ArrayLike | None, name: str | None
+) -> _Series:
+    """A plan evaluated analytically on a uniform grid plus its knots; ``|Δv|`` across each knot from the
+    polynomials on either side."""
+    grid_rate = as_positive(1000.0 if rate is None else rate, "rate")
+    t = np.union1d(subject.sample_times(grid_rate), subject.times)
+    q, v, a, j = (subject(t, k) for k in range(4))
+    if waypoint_times is not None:
+        _times(waypoint_times)  # validated; a plan's velocity steps are measured at its knots, below
+    eps = 1e-9
+    inner = subject.times[1:-1]
+    n = len(subject.joint_names)
+    dv_wp = np.abs(subject(inner + eps, 1) - subject(inner - eps, 1)).max(axis=0) if inner.size else np.zeros(n)
+    dv = np.maximum(np.abs(np.diff(v, axis=0)).max(axis=0), dv_wp)
+    label = name or repr(subject)
+    v_peak = np.abs(v).max(axis=0)
+    return _Series(subject.joint_names, t, q, v, a, j, dv, dv_wp, v_peak, 1.0 / grid_rate, label, "trajectory")
+
+
+def _stream_samples(
+    subject: Replay | JointStateSamples, rate: float | None, source: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, float]:
+    """``(t, q, reported v, reported a or None, nominal rate)`` of a replay's updates or samples, or of samples."""
+    if isinstance(subject, JointStateSamples):
+        stream_rate = subject.rate if rate is None else as_positive(rate, "rate")
+        return subject.times, subject.positions, subject.velocities, None, stream_rate
+    if source == "samples":
+        if subject.samples is None:
+            raise InvalidInputError("source", source, "'updates' (this replay has no joint_states samples)")
+        s = subject.samples
+        return s.times, s.positions, s.velocities, None, s.rate if rate is None else as_positive(rate, "rate")
+    if source != "updates":
+        raise InvalidInputError("source", source, "'updates' or 'samples'")
+    t = np.concatenate([[0.0], subject.times])
+    q = np.vstack([subject.initial_positions, subject.positions])
+    v_rep = np.vstack([subject.initial_velocities, subject.velocities])
+    a_rep = None
+    if subject.accelerations is not None:
+        a_rep = np.vstack([np.zeros(subject.n_joints), subject.accelerations])
+    return t, q, v_rep, a_rep, subject.rate if rate is None else as_positive(rate, "rate")
+
+
+def _stream_series(
+    subject: Replay | JointStateSamples,
+    rate: float | None,
+    waypoint_times: npt.ArrayLike | None,
+    source: str,
+    name: str | None,
+    th: Thresholds,
+) -> _Series:
+    """A stream's derivatives by finite differences between updates, its timing, and ``|Δv|`` at waypoints."""
+    t, q, v_rep, a_rep, stream_rate = _stream_samples(subject, rate, source)
+    if isinstance(subject, Replay):
+        names = subject.joint_names
+        dropped = tuple(subject.dropped)
+        wp = subject.waypoint_times if waypoint_times is None else _times(waypoint_times)
+        label = name or subject.controller
+        notes = tuple(subject.events[:5])
+        src = source
+    else:
+        names = subject.joint_names or tuple(f"joint{i}" for i in range(q.shape[1]))
+        dropped, notes, src = (), (), "samples"
+        wp = np.zeros(0) if waypoint_times is None else _times(waypoint_times)
+        label = name or "joint_states"
+    period = 1.0 / stream_rate
+    if len(t) < 2:
+        raise InvalidInputError("subject", f"{len(t)} samples", "a stream of at least 2 samples")
+    if np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
+        raise InvalidInputError("times", "non-monotonic or non-finite sample times", "non-decreasing times")
+    if not np.all(np.isfinite(q)):
+        raise InvalidInputError("positions", "NaN or inf", "finite positions")
+    stamps = subject.times if isinstance(subject, Replay) and src == "updates" else t
+    timing = _timing(np.diff(stamps), period, th) if len(stamps) >= 2 else None
+    # updates closer than a quarter period are merged (last value wins): a near-duplicate update is not a
+    # sample a robot can follow, and differences over nanoseconds would swamp the derivatives
+    keep = np.append(np.diff(t) > 0.25 * period, True)
+    t, q = t[keep], q[keep]
+    v_rep = v_rep[keep]
+    if len(t) < 2:  # nothing moved in time (e.g. every waypoint dropped): hold the state one period
+        t = np.append(t, t[-1] + period)
+        q = np.vstack([q, q[-1:]])
+        v_rep = np.vstack([v_rep, np.zeros_like(v_rep[-1:])])
+        if a_rep is not None:
+            a_rep = np.vstack([a_rep[keep], np.zeros_like(a_rep[-1:])])
+            keep = np.ones(len(t), dtype=bool)
+    h = np.diff(t)[:, None]
+    v_fd = np.vstack([np.zeros((1, q.shape[1])), np.diff(q, axis=0) / h])
+    v = np.where(np.isfinite(v_rep), v_rep, v_fd)
+    a = a_rep[keep] if a_rep is not None else np.vstack([np.zeros((1, q.shape[1])), np.diff(v, axis=0) / h])
+    j = np.vstack([np.zeros((1, q.shape[1])), np.diff(a, axis=0) / h])
+    v_peak = np.maximum(np.abs(v).max(axis=0), np.abs(v_fd).max(axis=0))
+    dv_all = np.abs(np.diff(v, axis=0))
+    dv = dv_all.max(axis=0)
+    dv_wp = np.zeros(q.shape[1])
+    if wp.size:
+        k = np.clip(np.searchsorted(t, wp - 1e-12), 1, len(t) - 1)
+        dv_wp = np.maximum(dv_all[k - 1], dv_all[np.minimum(k, len(dv_all) - 1)]).max(axis=0)
+    return _Series(tuple(names), t, q, v, a, j, dv, dv_wp, v_peak, period, label, src, timing, dropped, notes)
+
+
+def _joint_checks(s: _Series, lim: JointLimits, th: Thresholds) -> list[JointCheck]:
+    """Per joint: peaks against the limits, velocity steps, position excursion, SPARC and LDLJ on a uniform grid."""
+    step_limit = (
+        lim.acceleration * s.period * (1 + th.acceleration_tolerance)
+        if th.velocity_step is None
+        else np.broadcast_to(np.asarray(th.velocity_step, dtype=float), (len(s.names),))
+    )
+    t_u = np.arange(s.t[0], s.t[-1] + 1e-12, s.period)
     if t_u.size < 2:
-        t_u = np.array([t[0], t[-1]])
-    v_u = np.column_stack([np.interp(t_u, t, v[:, i]) for i in range(len(names))])
-    sparcs = _sparc_columns(v_u, 1.0 / period)
+        t_u = np.array([s.t[0], s.t[-1]])
+    v_u = np.column_stack([np.interp(t_u, s.t, s.v[:, i]) for i in range(len(s.names))])
+    sparcs = _sparc_columns(v_u, 1.0 / s.period)
     joints = []
-    for i, joint in enumerate(names):
-        vi_u = v_u[:, i]
-        ji_u = np.interp(t_u, t, j[:, i])
-        moving = np.max(np.abs(v[:, i])) > _STILL
+    for i, joint in enumerate(s.names):
+        moving = np.max(np.abs(s.v[:, i])) > _STILL
         sp = float(sparcs[i]) if moving else float("nan")
-        lj = ldlj(vi_u, ji_u, 1.0 / period) if moving else float("nan")
-        qmin, qmax = float(q[:, i].min()), float(q[:, i].max())
+        lj = ldlj(v_u[:, i], np.interp(t_u, s.t, s.j[:, i]), 1.0 / s.period) if moving else float("nan")
+        qmin, qmax = float(s.q[:, i].min()), float(s.q[:, i].max())
         violation = max(0.0, float(lim.lower[i]) - qmin, qmax - float(lim.upper[i]))
-        peaks = (float(v_peak[i]), float(np.abs(a[:, i]).max()), float(np.abs(j[:, i]).max()))
-        fails = []
-        if peaks[0] > lim.velocity[i] * (1 + th.velocity_tolerance) + 1e-12:
-            fails.append(f"velocity {peaks[0]:.4g} > {lim.velocity[i]:.4g}")
-        if peaks[1] > lim.acceleration[i] * (1 + th.acceleration_tolerance) + 1e-12:
-            fails.append(f"acceleration {peaks[1]:.4g} > {lim.acceleration[i]:.4g}")
-        if th.check_jerk and peaks[2] > lim.jerk[i] * (1 + th.jerk_tolerance) + 1e-12:
-            fails.append(f"jerk {peaks[2]:.4g} > {lim.jerk[i]:.4g}")
-        if max(dv[i], dv_wp[i]) > step_limit[i] + 1e-12:
-            fails.append(f"velocity step {max(dv[i], dv_wp[i]):.4g} > {step_limit[i]:.4g}")
-        if violation > th.position_tolerance:
-            fails.append(f"position limit exceeded by {violation:.4g}")
-        if th.sparc_min is not None and np.isfinite(sp) and sp < th.sparc_min:
-            fails.append(f"SPARC {sp:.3f} < {th.sparc_min}")
-        if th.ldlj_min is not None and np.isfinite(lj) and lj < th.ldlj_min:
-            fails.append(f"LDLJ {lj:.3f} < {th.ldlj_min}")
+        peaks = (float(s.v_peak[i]), float(np.abs(s.a[:, i]).max()), float(np.abs(s.j[:, i]).max()))
+        step = max(s.dv[i], s.dv_wp[i])
+        fails = _failures(peaks, step, violation, sp, lj, lim, i, float(step_limit[i]), th)
         joints.append(
             JointCheck(
                 joint,
@@ -480,8 +519,8 @@ def check(
                 float(lim.acceleration[i]),
                 peaks[2],
                 float(lim.jerk[i]),
-                float(dv[i]),
-                float(dv_wp[i]),
+                float(s.dv[i]),
+                float(s.dv_wp[i]),
                 float(step_limit[i]),
                 qmin,
                 qmax,
@@ -493,17 +532,37 @@ def check(
                 tuple(fails),
             )
         )
-    return Report(
-        subject=label,
-        source=src,
-        rate=1.0 / period,
-        duration=float(t[-1] - t[0]),
-        joints=tuple(joints),
-        timing=timing,
-        thresholds=th,
-        dropped_waypoints=dropped,
-        notes=tuple(notes),
-    )
+    return joints
+
+
+def _failures(
+    peaks: tuple[float, float, float],
+    step: float,
+    violation: float,
+    sp: float,
+    lj: float,
+    lim: JointLimits,
+    i: int,
+    step_limit: float,
+    th: Thresholds,
+) -> list[str]:
+    """Why joint ``i`` fails (empty: it passes)."""
+    fails = []
+    if peaks[0] > lim.velocity[i] * (1 + th.velocity_tolerance) + 1e-12:
+        fails.append(f"velocity {peaks[0]:.4g} > {lim.velocity[i]:.4g}")
+    if peaks[1] > lim.acceleration[i] * (1 + th.acceleration_tolerance) + 1e-12:
+        fails.append(f"acceleration {peaks[1]:.4g} > {lim.acceleration[i]:.4g}")
+    if th.check_jerk and peaks[2] > lim.jerk[i] * (1 + th.jerk_tolerance) + 1e-12:
+        fails.append(f"jerk {peaks[2]:.4g} > {lim.jerk[i]:.4g}")
+    if step > step_limit + 1e-12:
+        fails.append(f"velocity step {step:.4g} > {step_limit:.4g}")
+    if violation > th.position_tolerance:
+        fails.append(f"position limit exceeded by {violation:.4g}")
+    if th.sparc_min is not None and np.isfinite(sp) and sp < th.sparc_min:
+        fails.append(f"SPARC {sp:.3f} < {th.sparc_min}")
+    if th.ldlj_min is not None and np.isfinite(lj) and lj < th.ldlj_min:
+        fails.append(f"LDLJ {lj:.3f} < {th.ldlj_min}")
+    return fails
 
 
 def stream_timing(times: npt.ArrayLike, rate: float, thresholds: Thresholds | None = None) -> TimingCheck:
