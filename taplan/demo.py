@@ -321,12 +321,64 @@ def write_outputs(
 
         for plan in plans:
             say(f"plots: {plan.name}")
-            files.append(save_profiles(plan.trajectory, out / f"{plan.name}_plan.png", robot.limits))
-            files.append(
-                save_profiles(plan.replays["jtc (quintic)"], out / f"{plan.name}_jtc.png", robot.limits, samples=False)
-            )
+            title = f"{plan.name}: the plan ({plan.description}), hardware limits"
+            files.append(save_profiles(plan.trajectory, out / f"{plan.name}_plan.png", robot.limits, title=title))
+            replay = plan.replays["jtc (quintic)"]
+            title = f"{plan.name} through ros2_control's joint_trajectory_controller (quintic), hardware limits"
+            files.append(save_profiles(replay, out / f"{plan.name}_jtc.png", robot.limits, samples=False, title=title))
         files.append(_comparison_plot(out / "guide_vs_taplan.png", robot, comparisons))
+    files.append(write_markdown_report(out / "report.md", plans, comparisons, plots=plots))
     return files
+
+
+def _summary(report: Report) -> list[str]:
+    """Peak velocity and acceleration as fractions of their limits, the largest velocity step, mean SPARC, verdict."""
+    joints = report.joints
+    v = max(j.peak_velocity / j.velocity_limit for j in joints)
+    a = max(j.peak_acceleration / j.acceleration_limit for j in joints)
+    dv = max(j.max_velocity_step for j in joints)
+    moved = [j.sparc for j in joints if np.isfinite(j.sparc)]
+    sparc = f"{np.mean(moved):.2f}" if moved else "-"
+    verdict = "**PASS**" if report.passed else "**FAIL**: " + "; ".join(report.failures[:3])
+    return [f"{v:.2f}", f"{a:.2f}", f"{dv:.4f}", sparc, verdict]
+
+
+def write_markdown_report(path: Path, plans: list[PlanResult], comparisons: list[Comparison], *, plots: bool) -> Path:
+    """The demo's report for a person: per plan its description, notes, the check of the plan and of each
+    controller's replay as a table, and its plots; then the guide's approaches against taplan's (``report.json``
+    holds every number)."""
+    head = "| checked | peak v / limit | peak a / limit | max \\|Δv\\| [rad/s] | SPARC | result |"
+    rule = "|---|---:|---:|---:|---:|---|"
+    lines = [
+        "# taplan demo on the bundled TeleAvatar",
+        "",
+        "Plans under the planning limits, checked against the hardware ceilings, as planned (1 kHz) and as each "
+        "reference controller replays them. Every number is in `report.json`; trajectories are the `<plan>.json` "
+        "files (exact) and `<plan>_100hz.csv` (samples at 100 Hz). The scene plan in 3D: [scene.html](scene.html).",
+        "",
+    ]
+    for plan in plans:
+        lines += [f"## {plan.name}: {plan.description} ({plan.trajectory.duration:.2f} s)", ""]
+        lines += [f"- {note}" for note in plan.notes] + ([""] if plan.notes else [])
+        lines += [head, rule]
+        lines += ["| " + " | ".join([label, *_summary(report)]) + " |" for label, report in plan.reports.items()]
+        lines.append("")
+        if plots:
+            lines += [f"![{plan.name}: the plan]({plan.name}_plan.png)", ""]
+            lines += [f"![{plan.name} through the joint trajectory controller]({plan.name}_jtc.png)", ""]
+    lines += ["## The guide's approaches against taplan's (the reach motion, the arm's 100 Hz joint loop)", ""]
+    lines += [head.replace("checked", "approach"), rule]
+    lines += ["| " + " | ".join([c.approach, *_summary(c.report)]) + " |" for c in comparisons]
+    lines += [
+        "",
+        "|Δv| is the largest velocity change between two 10 ms updates; more than the acceleration ceiling × 10 ms is "
+        "a velocity step the arm cannot follow.",
+        "",
+    ]
+    if plots:
+        lines += ["![the guide's approaches against taplan's](guide_vs_taplan.png)", ""]
+    path.write_text("\n".join(lines))
+    return path
 
 
 def _comparison_plot(path: Path, robot: Robot, comparisons: list[Comparison]) -> Path:

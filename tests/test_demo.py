@@ -108,3 +108,20 @@ def test_seen_plan_avoids_the_true_scene_it_was_perceived_from(demo):
     goal[7:] = SCENE_REACH_RIGHT
     end = robot.frame_pose(plan.trajectory(plan.trajectory.duration), "right_tcp")[:3, 3]
     np.testing.assert_allclose(end, robot.frame_pose(goal, "right_tcp")[:3, 3], atol=POSE_TOL)
+
+
+def test_the_report_a_person_reads(demo, tmp_path):
+    """report.md beside report.json: per plan a table of every check and its pictures, then the guide comparison."""
+    from taplan.demo import write_markdown_report
+
+    text = (demo.out_dir / "report.md").read_text()
+    for plan in demo.plans:
+        assert f"## {plan.name}: {plan.description}" in text
+        for label in plan.reports:
+            assert f"| {label} | " in text
+    assert "| guide: linear @50 Hz, position target | " in text and "**PASS**" in text and "**FAIL**" in text
+    assert "![" not in text  # no pictures were drawn (plots=False): none linked
+    with_plots = write_markdown_report(tmp_path / "report.md", demo.plans, demo.comparisons, plots=True).read_text()
+    pictures = [line[line.index("(") + 1 : -1] for line in with_plots.splitlines() if line.startswith("![")]
+    expected = {f"{p.name}_{kind}.png" for p in demo.plans for kind in ("plan", "jtc")} | {"guide_vs_taplan.png"}
+    assert set(pictures) == expected  # the names write_outputs saves the plots under
