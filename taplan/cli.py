@@ -42,7 +42,7 @@ def plain_text(doc: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="taplan", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="taplan", description=plain_text(__doc__.splitlines()[0]))
     parser.add_argument("--version", action="version", version=f"taplan {taplan.__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in COMMANDS:

@@ -225,3 +225,19 @@ def test_bench_report_only_keeps_the_measured_machine_line(tmp_path: Path, monke
     runner.write_report(None, measured=False)
     text = (tmp_path / "RESULTS.md").read_text()
     assert "- Machine: the measuring box, 2 CPUs" in text and "- Run time: ik 3 s" in text
+
+
+def test_help_has_no_rst_markup(capsys) -> None:  # noqa: ANN001
+    """``taplan -h`` and every ``taplan CMD -h`` read as plain text: no ``literals``, :roles:, `quotes` or **bold**."""
+    import re
+
+    from taplan.cli import COMMANDS
+
+    for argv in [[]] + [[name] for name in COMMANDS]:
+        try:
+            main([*argv, "-h"])
+        except SystemExit as exc:
+            assert exc.code == 0
+        text = capsys.readouterr().out
+        assert text.startswith("usage: taplan"), argv
+        assert not re.search(r"``|`|:[a-z]+:|\*\*", text.replace("::", "")), (argv, text)

@@ -15,7 +15,7 @@ def add_transport_arguments(parser: argparse.ArgumentParser) -> None:
         "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's, else 0; robot: 29)"
     )
     parser.add_argument(
-        "--loopback", action="store_true", help="keep DDS on 127.0.0.1 (rehearsal with `taplan sim` on this machine)"
+        "--loopback", action="store_true", help="keep DDS on 127.0.0.1 (rehearsal with taplan sim on this machine)"
     )
     parser.add_argument("--bag", type=Path, default=None, help="record both directions to this rosbag2 .mcap file")
     parser.add_argument("-v", "--verbose", action="store_true", help="log every event (default: warnings)")

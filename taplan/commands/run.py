@@ -20,7 +20,7 @@ from taplan.commands._ros_args import add_transport_arguments, open_transport
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", nargs="?", type=Path, help="trajectory file (.json, .csv, .npz) from `taplan plan`")
+    parser.add_argument("file", nargs="?", type=Path, help="trajectory file (.json, .csv, .npz) from taplan plan")
     add_transport_arguments(parser)
     parser.add_argument("--hold", type=float, default=None, help="hold the measured position this long [s]")
     parser.add_argument("--targets", default=None, help="stream JSON-line targets from this file ('-': stdin)")
