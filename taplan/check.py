@@ -337,6 +337,8 @@ class _Series:
     timing: TimingCheck | None = None
     dropped: tuple[int, ...] = ()
     notes: tuple[str, ...] = ()
+    q_range: tuple[np.ndarray, np.ndarray] | None = None  # a plan's exact position range, when known
+    a_peak: np.ndarray | None = None  # a plan's exact peak |acceleration|
 
 
 def check(
@@ -393,8 +395,14 @@ def _plan_series(
     """A plan evaluated analytically on a uniform grid plus its knots; ``|Δv|`` across each knot from the
     polynomials on either side."""
     grid_rate = as_positive(1000.0 if rate is None else rate, "rate")
-    t = np.union1d(subject.sample_times(grid_rate), subject.times)
+    # the grid, the knots and the instants just before them (a derivative's value as its segment ends)
+    t = np.union1d(np.union1d(subject.sample_times(grid_rate), subject.times), subject.times[1:] - 1e-9)
     q, v, a, j = (subject(t, k) for k in range(4))
+    # peaks between grid points, found by successive parabolic interpolation: every value is the trajectory's own
+    # at some instant, so a plan beyond a limit between two samples fails and no plan fails for a value it lacks
+    q_low, q_high = _extremes(subject, t, q, 0)
+    v_low, v_high = _extremes(subject, t, v, 1)
+    a_low, a_high = _extremes(subject, t, a, 2)
     if waypoint_times is not None:
         _times(waypoint_times)  # validated; a plan's velocity steps are measured at its knots, below
     eps = 1e-9
@@ -403,8 +411,60 @@ def _plan_series(
     dv_wp = np.abs(subject(inner + eps, 1) - subject(inner - eps, 1)).max(axis=0) if inner.size else np.zeros(n)
     dv = np.maximum(np.abs(np.diff(v, axis=0)).max(axis=0), dv_wp)
     label = name or repr(subject)
-    v_peak = np.abs(v).max(axis=0)
-    return _Series(subject.joint_names, t, q, v, a, j, dv, dv_wp, v_peak, 1.0 / grid_rate, label, "trajectory")
+    v_peak = np.maximum(np.abs(v_low), np.abs(v_high))
+    series = _Series(subject.joint_names, t, q, v, a, j, dv, dv_wp, v_peak, 1.0 / grid_rate, label, "trajectory")
+    series.q_range = (q_low, q_high)
+    series.a_peak = np.maximum(np.abs(a_low), np.abs(a_high))
+    return series
+
+
+_REFINE_STEPS = 4
+_MAX_CANDIDATES = 20_000  # local extrema refined per quantity (the largest first)
+
+
+def _extremes(subject: Trajectory, t: np.ndarray, y: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint the smallest and largest value of derivative ``order`` of ``subject``: its samples ``y`` at ``t``,
+    each interior local extremum refined by successive parabolic interpolation inside its neighbouring samples."""
+    low, high = y.min(axis=0), y.max(axis=0)
+    if len(t) < 3:
+        return low, high
+    for sign in (1.0, -1.0):
+        z = sign * y
+        rows, cols = np.nonzero((z[1:-1] >= z[:-2]) & (z[1:-1] >= z[2:]))
+        rows = rows + 1
+        if rows.size > _MAX_CANDIDATES:
+            keep = np.argsort(z[rows, cols])[-_MAX_CANDIDATES:]
+            rows, cols = rows[keep], cols[keep]
+        if rows.size == 0:
+            continue
+        a, b, c = t[rows - 1], t[rows], t[rows + 1]
+        fa, fb, fc = z[rows - 1, cols], z[rows, cols], z[rows + 1, cols]
+        pick = np.arange(rows.size)
+        for _ in range(_REFINE_STEPS):
+            num = (b - a) ** 2 * (fb - fc) - (b - c) ** 2 * (fb - fa)
+            den = (b - a) * (fb - fc) - (b - c) * (fb - fa)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = np.where(den != 0, b - 0.5 * num / den, b)
+            x = np.clip(np.nan_to_num(x, nan=0.0), a, c)
+            fx = sign * subject(x, order)[pick, cols]
+            better, left = fx > fb, x < b
+            # the new point becomes the middle when it is higher; otherwise it closes the bracket on its side
+            a, fa = (
+                np.where(better & ~left, b, np.where(~better & left, x, a)),
+                np.where(better & ~left, fb, np.where(~better & left, fx, fa)),
+            )
+            c, fc = (
+                np.where(better & left, b, np.where(~better & ~left, x, c)),
+                np.where(better & left, fb, np.where(~better & ~left, fx, fc)),
+            )
+            b, fb = np.where(better, x, b), np.where(better, fx, fb)
+        best = np.full(y.shape[1], -np.inf)
+        np.maximum.at(best, cols, fb)
+        if sign > 0:
+            high = np.maximum(high, best)
+        else:
+            low = np.minimum(low, -best)
+    return low, high
 
 
 def _stream_samples(
@@ -505,9 +565,11 @@ def _joint_checks(s: _Series, lim: JointLimits, th: Thresholds) -> list[JointChe
         moving = np.max(np.abs(s.v[:, i])) > _STILL
         sp = float(sparcs[i]) if moving else float("nan")
         lj = ldlj(v_u[:, i], np.interp(t_u, s.t, s.j[:, i]), 1.0 / s.period) if moving else float("nan")
-        qmin, qmax = float(s.q[:, i].min()), float(s.q[:, i].max())
+        low, high = s.q_range if s.q_range is not None else (s.q.min(axis=0), s.q.max(axis=0))
+        qmin, qmax = float(low[i]), float(high[i])
         violation = max(0.0, float(lim.lower[i]) - qmin, qmax - float(lim.upper[i]))
-        peaks = (float(s.v_peak[i]), float(np.abs(s.a[:, i]).max()), float(np.abs(s.j[:, i]).max()))
+        a_peak = float(s.a_peak[i]) if s.a_peak is not None else float(np.abs(s.a[:, i]).max())
+        peaks = (float(s.v_peak[i]), a_peak, float(np.abs(s.j[:, i]).max()))
         step = max(s.dv[i], s.dv_wp[i])
         fails = _failures(peaks, step, violation, sp, lj, lim, i, float(step_limit[i]), th)
         joints.append(

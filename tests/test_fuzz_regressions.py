@@ -131,3 +131,27 @@ def test_a_spike_between_controller_samples_still_fails(teleavatar, tmp_path: Pa
     assert code == 1  # the plan alone fails
     code, out, _ = run_cli(["check", str(path), "--no-png", "--controller", controller], capsys)
     assert code == 1 and "the plan itself: FAIL" in out and "l_joint4: acceleration" in out
+
+
+def test_a_peak_between_grid_samples_fails(teleavatar, tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    """A parabola whose vertex (1e-6 rad past l_joint2's limit) lies between two 1 kHz samples, which both sit about
+    9e-6 rad inside it: the check evaluated only its grid and passed it; now the peaks between samples are refined."""
+    from taplan.check import check
+    from taplan.trajectory import Trajectory
+
+    lim = teleavatar.limits
+    j, tp, curvature, excess = 1, 0.0505, 40.0, 1e-6  # joint, vertex [s], [rad/s²] / 2, [rad]
+    peak = lim.upper[j] + excess
+    c = np.zeros((1, 3, 14))
+    c[0, 0] = teleavatar.home
+    c[0, 0, j] = peak - curvature * tp**2
+    c[0, 1, j] = 2 * curvature * tp
+    c[0, 2, j] = -curvature
+    plan = Trajectory.from_polynomials([0.0, 2 * tp], c, teleavatar.joint_names)
+    grid = plan(plan.sample_times(1000.0))[:, j]
+    assert grid.max() < lim.upper[j] - 8e-6  # every sample is inside the limit
+    report = check(plan, lim)
+    assert not report.passed
+    assert report.joint("l_joint2").position_violation == pytest.approx(excess, abs=1e-9)  # [rad]
+    code, out, _ = run_cli(["check", str(plan.save(tmp_path / "p.json")), "--no-png"], capsys)
+    assert code == 1 and "position limit exceeded" in out
