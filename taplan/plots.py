@@ -95,7 +95,7 @@ def _limit_lines(ax: Any, row: int, lim: JointLimits, chosen: Sequence[str], dat
             ax.text(0.005, 0.97, note, transform=ax.transAxes, fontsize=6, va="top", color="0.3")
     ax.set_ylim(low, high)
     blend = mtransforms.blended_transform_factory(ax.transAxes, ax.transData)
-    gap = 0.07 * (high - low)  # labels at least this far apart, pushed apart in order
+    gap = min(0.07, 0.95 / max(len(shown), 1)) * (high - low)  # labels at least this far apart, pushed upward
     signs = (1.0,) if row == 0 else (1.0, -1.0)
     for sign in signs:
         last = -np.inf
