@@ -1,6 +1,7 @@
 """Plots of a plan or replay: position, velocity, acceleration and jerk per joint with limit bands.
 
-matplotlib is imported inside the functions with the ``Agg`` backend, so importing taplan never needs a display.
+matplotlib is imported inside the functions (with the ``Agg`` backend unless pyplot is already in use, e.g. inline
+in a notebook), so importing taplan never needs a display.
 """
 
 from __future__ import annotations
@@ -141,9 +142,12 @@ def plot_profiles(
     Returns:
         The matplotlib Figure.
     """
+    import sys
+
     import matplotlib
 
-    matplotlib.use("Agg", force=False)
+    if "matplotlib.pyplot" not in sys.modules:  # a script saving PNGs: no window; a notebook keeps its backend
+        matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.transforms as mtransforms
 

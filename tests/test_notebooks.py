@@ -30,7 +30,7 @@ def test_notebook_executes(path, tmp_path, monkeypatch):
 
 def _draws(cell) -> bool:  # noqa: ANN001
     """Whether a code cell ends with a figure on screen (it creates one with matplotlib)."""
-    return "plt.subplots" in cell.source or "plt.figure" in cell.source or "plot_profiles" in cell.source
+    return any(call in cell.source for call in ("plt.subplots(", "plt.figure(", "= plot_profiles("))
 
 
 def test_all_capability_notebooks_exist():
