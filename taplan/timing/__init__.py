@@ -45,4 +45,3 @@ __all__ = [
     "time_demonstration",
     "time_optimal_profile",
 ]
-
