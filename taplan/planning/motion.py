@@ -64,7 +64,7 @@ IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
 FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path search leaves this for timing + verify
 SMOOTH_HEADROOM, SMOOTH_MIN = 2.5, 0.05  # smoothing runs when the time left exceeds 2.5x the finish + 0.05 s
 OPTIMIZE_SHARE = 0.25  # of the search time, for the optimiser from the straight line when the sampler follows it
-MARGIN_SHARES = 0.5  # of the time left, for the sampler at each margin but the last (the floor gets the rest)
+MARGIN_SHARES = 0.7  # of the time left, for the sampler at each margin but the last (the floor gets the rest)
 
 
 @dataclass(frozen=True)

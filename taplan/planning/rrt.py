@@ -190,6 +190,8 @@ def rrt_connect_shrinking(
         until = time.perf_counter() + share * max(deadline - time.perf_counter(), 0.0)
         check = ClearanceCheck(world, margin)
         spacing = SPACING_SHARE * margin
+        if not (check(start) and check(goal)):
+            continue  # an end inside this margin: no tree grows from it, the next margin gets the time
 
         def valid_motion(a: np.ndarray, b: np.ndarray, check: ClearanceCheck = check, spacing: float = spacing) -> bool:
             qa, qb = full.copy(), full.copy()
