@@ -155,8 +155,9 @@ def joint_cmd(
     side: str,
     position: npt.ArrayLike,
     *,
-    convention: Literal["position", "velocity_feedback"] = "position",
+    convention: Literal["position", "velocity_feedback", "feedforward"] = "position",
     measured: npt.ArrayLike | None = None,
+    velocity: npt.ArrayLike | None = None,
     limits: JointLimits | None = None,
     names: Sequence[str] | None = None,
     kp: npt.ArrayLike = FEEDBACK_KP,
@@ -168,9 +169,10 @@ def joint_cmd(
     Args:
         side: ``"left"`` or ``"right"``.
         position: Desired joint angles [rad], shape (7,), in ``names`` order.
-        convention: ``"position"`` (velocity and effort zero) or ``"velocity_feedback"`` (velocity from
-            :func:`feedback_velocity`; needs ``measured``).
+        convention: ``"position"`` (velocity and effort zero), ``"velocity_feedback"`` (velocity from
+            :func:`feedback_velocity`; needs ``measured``) or ``"feedforward"`` (the plan's own ``velocity``).
         measured: Measured joint angles [rad], shape (7,), same order (``"velocity_feedback"`` only).
+        velocity: The plan's velocity [rad]/[s], shape (7,), same order (``"feedforward"`` only).
         limits: When given, ``position`` must lie within these bounds (joints looked up by name); the robot clips
             out-of-range targets silently, so taplan refuses them instead.
         names: Joint names; default ``l_joint1..7`` / ``r_joint1..7``.
@@ -196,14 +198,18 @@ def joint_cmd(
             i = int(np.flatnonzero(outside)[0])
             raise InvalidInputError("position", f"{names[i]} = {q[i]:.6g} rad", f"within [{lo[i]:.6g}, {hi[i]:.6g}]")
     if convention == "position":
-        velocity = [0.0] * n
+        sent = [0.0] * n
     elif convention == "velocity_feedback":
         if measured is None:
             raise InvalidInputError("measured", None, "the measured positions for convention='velocity_feedback'")
-        velocity = feedback_velocity(q, measured, kp=kp, alpha=alpha, velocity_limit=velocity_limit).tolist()
+        sent = feedback_velocity(q, measured, kp=kp, alpha=alpha, velocity_limit=velocity_limit).tolist()
+    elif convention == "feedforward":
+        if velocity is None:
+            raise InvalidInputError("velocity", None, "the plan's velocities for convention='feedforward'")
+        sent = as_vector(velocity, "velocity", n).tolist()
     else:
-        raise InvalidInputError("convention", convention, "'position' or 'velocity_feedback'")
-    fields = {"name": list(names), "position": q.tolist(), "velocity": velocity, "effort": [0.0] * n}
+        raise InvalidInputError("convention", convention, "'position', 'velocity_feedback' or 'feedforward'")
+    fields = {"name": list(names), "position": q.tolist(), "velocity": sent, "effort": [0.0] * n}
     return ApiMessage(Topics.joint_cmd(side), JOINT_STATE, fields)
 
 

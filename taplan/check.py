@@ -41,6 +41,17 @@ __all__ = ["JointCheck", "Report", "Thresholds", "TimingCheck", "check", "ldlj",
 
 _STILL = 1e-9  # [rad]/[s]: a joint slower than this everywhere "does not move"
 
+# The collision half of check(): taplan.clearance (a layer above, it certifies with the planners' conservative
+# advancement) registers it when imported, which ``import taplan`` does.
+_collision_check: Any = None
+
+
+def register_collision_check(function: Any) -> None:
+    """Called by :mod:`taplan.clearance`: ``function(subject, names, q, t, clearance, hold, notes)`` returns the
+    ``ClearanceCheck`` of a checked subject or None."""
+    global _collision_check
+    _collision_check = function
+
 
 @dataclass(frozen=True)
 class Thresholds:
@@ -136,6 +147,7 @@ class Report:
     thresholds: Thresholds
     dropped_waypoints: tuple[int, ...] = ()
     notes: tuple[str, ...] = field(default_factory=tuple)
+    clearance: Any = None  # a taplan.clearance.ClearanceCheck
 
     @property
     def passed(self) -> bool:
@@ -143,6 +155,7 @@ class Report:
             all(j.passed for j in self.joints)
             and (self.timing is None or self.timing.passed)
             and not self.dropped_waypoints
+            and (self.clearance is None or self.clearance.passed)
         )
 
     @property
@@ -153,6 +166,8 @@ class Report:
             out += [f"timing: {f}" for f in self.timing.failures]
         if self.dropped_waypoints:
             out.append(f"waypoints: dropped {list(self.dropped_waypoints)}")
+        if self.clearance is not None and not self.clearance.passed:
+            out.append(self.clearance.line())
         return out
 
     def joint(self, name: str) -> JointCheck:
@@ -192,6 +207,8 @@ class Report:
             )
         if self.dropped_waypoints:
             lines.append(f"dropped waypoints: {list(self.dropped_waypoints)}: FAIL")
+        if self.clearance is not None:
+            lines.append(self.clearance.line())
         if not bounded:
             over = [j.name for j in self.joints if j.peak_jerk > j.jerk_limit]
             lines.append(
@@ -229,6 +246,7 @@ class Report:
                 "thresholds": asdict(self.thresholds),
                 "dropped_waypoints": list(self.dropped_waypoints),
                 "notes": list(self.notes),
+                "clearance": None if self.clearance is None else self.clearance.to_dict(),
             }
         )
 
@@ -350,6 +368,8 @@ def check(
     waypoint_times: npt.ArrayLike | None = None,
     source: str = "updates",
     name: str | None = None,
+    clearance: Any = "auto",
+    hold: npt.ArrayLike | None = None,
 ) -> Report:
     """Check a plan or a replay against joint limits and for smoothness.
 
@@ -364,6 +384,13 @@ def check(
         waypoint_times: Times of the waypoints [s] (default the Trajectory's knots / the replay's reached points).
         source: ``"updates"`` or ``"samples"`` for a Replay.
         name: Label of the subject in the report.
+        clearance: Collision check (:func:`taplan.clearance.check_clearance`, always on by default; registered by
+            :mod:`taplan.clearance`, which ``import taplan`` imports): ``"auto"``
+            checks the bundled TeleAvatar's own bodies when every joint of the subject is one of its joints (a
+            note says when it is skipped because they are not); a :class:`~taplan.robot.Robot` or a
+            :class:`~taplan.scene.CollisionWorld` (with a scene: its obstacles too) is used as given; None skips it.
+            A Trajectory is certified continuously, a stream along the segments between its samples.
+        hold: Positions [rad] (nq,) of the robot's joints the subject does not drive (default its home).
 
     Returns:
         The :class:`Report`.
@@ -376,6 +403,13 @@ def check(
     else:
         raise InvalidInputError("subject", type(subject).__name__, "a Trajectory, Replay or JointStateSamples")
     joints = _joint_checks(series, _limits(limits, series.names), th)
+    notes = list(series.notes)
+    clearance_check = None
+    if clearance is not None:
+        if _collision_check is None:
+            notes.append("collision: not checked (taplan.clearance is not imported)")
+        else:
+            clearance_check = _collision_check(subject, tuple(series.names), series.q, series.t, clearance, hold, notes)
     return Report(
         subject=series.label,
         source=series.source,
@@ -385,7 +419,8 @@ def check(
         timing=series.timing,
         thresholds=th,
         dropped_waypoints=series.dropped,
-        notes=series.notes,
+        notes=tuple(notes),
+        clearance=clearance_check,
     )
 
 

@@ -98,14 +98,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (see the module docstring)."""
     real_stdout = sys.stdout
     sys.stdout = safe = _PipeSafe(real_stdout)
+    code = EXIT_USAGE
     try:
         with warnings.catch_warnings():  # numpy's overflow notes on absurd inputs: the verdict or error says it
             warnings.simplefilter("ignore", RuntimeWarning)
-            return _main(argv)
+            code = _main(argv)
+        return code
     finally:
         if sys.stdout is safe:
             safe.flush()
             sys.stdout = real_stdout
+        command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
+        if argv is None and command in _FAST_EXIT:
+            _exit_now(code)
+
+
+# Commands that talk to a robot end as soon as their work is done: the interpreter's teardown of the loaded
+# libraries (pinocchio, casadi, Cyclone DDS) takes 2-4 s on a loaded machine, and a run whose robot crashed must
+# end within a second. Their files are closed and their output flushed before; only taplan's own command line
+# (argv None, i.e. ``taplan ...`` / ``python -m taplan ...``) exits this way, never a main([...]) call.
+_FAST_EXIT = {"run", "sim"}
+
+
+def _exit_now(code: int) -> None:
+    import logging
+
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(int(code))
 
 
 def _main(argv: Sequence[str] | None) -> int:

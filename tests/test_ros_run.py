@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import random
+import signal
 import subprocess
 import sys
 import threading
@@ -127,7 +128,15 @@ def test_runner_stops_smoothly_when_the_sim_is_killed(robot, start_sim) -> None:
     runner = Runner(interface, robot, config=RunnerConfig(ready_timeout=5.0))
     start = runner.wait_for_state()
     plan = _plan(robot, start, 0.8, legs=3)  # about 3 s
-    threading.Timer(1.2, sim.process.kill).start()  # after enabling (~0.3 s)
+
+    def kill_while_driving() -> None:  # after the pre-send check and enabling, whatever the machine's load
+        end = time.monotonic() + 60
+        while runner.fsm_state != 2 and time.monotonic() < end:
+            time.sleep(0.005)
+        time.sleep(0.9)
+        sim.process.kill()
+
+    threading.Thread(target=kill_while_driving, daemon=True).start()
     result = runner.execute(plan)  # no exception escapes
     interface.close()
     assert result.status == "stopped"
@@ -142,11 +151,21 @@ def test_runner_stops_smoothly_when_the_sim_is_killed(robot, start_sim) -> None:
 
 
 def test_runner_stops_when_joint_states_stall(robot, start_sim) -> None:
-    sim = start_sim("--stall-after", "2.5")
+    sim = start_sim()
     interface = DdsInterface(sim.domain, config=loopback_config())
     runner = Runner(interface, robot)
     start = runner.wait_for_state()
+
+    def freeze_while_driving() -> None:  # a frozen driver: the process stops, its joint states with it
+        end = time.monotonic() + 60
+        while runner.fsm_state != 2 and time.monotonic() < end:
+            time.sleep(0.005)
+        time.sleep(0.9)
+        os.kill(sim.process.pid, signal.SIGSTOP)
+
+    threading.Thread(target=freeze_while_driving, daemon=True).start()
     result = runner.execute(_plan(robot, start, 0.8, legs=3))
+    os.kill(sim.process.pid, signal.SIGCONT)
     interface.close()
     assert result.status == "stopped"
     assert "no joint states" in result.reason

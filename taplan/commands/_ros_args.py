@@ -17,7 +17,12 @@ def add_transport_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--loopback", action="store_true", help="keep DDS on 127.0.0.1 (rehearsal with taplan sim on this machine)"
     )
-    parser.add_argument("--bag", type=Path, default=None, help="record both directions to this rosbag2 .mcap file")
+    parser.add_argument(
+        "--bag",
+        type=Path,
+        default=None,
+        help="record both directions: a rosbag2 directory (metadata.yaml + MCAP, 1 s files) or one .mcap file",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log every event (default: warnings)")
 
 

@@ -1,13 +1,13 @@
 """Check a trajectory file against the joint limits and for smoothness; exit 1 when it fails.
 
-``taplan check plan.json`` evaluates the plan itself; ``taplan check run.mcap`` checks a recorded run (a rosbag2 MCAP
-file from ``taplan run --bag`` or ``ros2 bag record``): the commanded joint streams, their timing, the heartbeat
-gaps and the measured positions; ``--controller seed|intended|jtc|jtc-none|joint-position|
-joint-velocity`` checks what that controller would do with it instead (and the plan itself must still hold
-the position, velocity and acceleration limits: a sampled stream can hide an excess between its samples). Joints
-are matched by name to the robot (default the bundled TeleAvatar); ``--limits planning`` uses the planner's scaled
-limits instead of the hardware ceilings. Prints the report, writes a PNG of q, q̇, q̈ and jerk, and optionally the
-report as JSON.
+``taplan check plan.json`` evaluates the plan itself; ``taplan check run.mcap`` (or a rosbag2 directory ``run/``)
+checks a recorded run (from ``taplan run --bag`` or ``ros2 bag record -s mcap``): the commanded joint streams,
+their timing, the heartbeat gaps and the measured positions; ``--controller seed|intended|jtc|jtc-none|
+joint-position|joint-velocity`` checks what that controller would do with it instead (and the plan itself must
+still hold the position, velocity and acceleration limits: a sampled stream can hide an excess between its
+samples). Joints are matched by name to the robot (default the bundled TeleAvatar); ``--limits planning`` uses the
+planner's scaled limits instead of the hardware ceilings. Prints the report, writes a PNG of q, q̇, q̈ and jerk, and
+optionally the report as JSON.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def _validate(args: argparse.Namespace) -> None:
     """Every option checked before any work, so no error can follow a printed verdict."""
     validate_controller_arguments(args)
     if args.rate is not None:
-        if args.controller != "trajectory" or args.file.suffix.lower() == ".mcap":
+        if args.controller != "trajectory" or args.file.suffix.lower() == ".mcap" or _is_bag_directory(args.file):
             raise InvalidInputError("--rate", args.rate, "no --rate with a --controller or a bag (they set the rate)")
         args.rate = bounded_rate(args.rate, "--rate")
     if args.source is not None and args.controller == "trajectory":
@@ -56,15 +56,19 @@ def _validate(args: argparse.Namespace) -> None:
         output_path(args.png, "--png", suffixes=(".png",))
     if args.json is not None:
         output_path(args.json, "--json", suffixes=(".json",))
-    if not args.file.is_file():
-        raise ConfigError(f"file not found: {str(args.file)!r}")
+    if not (args.file.is_file() or _is_bag_directory(args.file)):
+        raise ConfigError(f"file not found: {str(args.file)!r} (a trajectory file, a .mcap bag or a rosbag2 directory)")
+
+
+def _is_bag_directory(path: Path) -> bool:
+    return path.is_dir() and (path / "metadata.yaml").is_file()
 
 
 def run(args: argparse.Namespace) -> int:
     from taplan.robot import Robot
 
     _validate(args)
-    if args.file.suffix.lower() == ".mcap":
+    if args.file.suffix.lower() == ".mcap" or _is_bag_directory(args.file):
         return _check_bag(args)
     robot = Robot.teleavatar()
     trajectory = load_trajectory(args.file, robot.joint_names)

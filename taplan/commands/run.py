@@ -2,8 +2,13 @@
 
 Waits for ``/{left,right}_arm/joint_states``, enables the robot (``/api/fsm/enable`` at 20 Hz, holding the measured
 position until ``/fsm_state`` is READY), then publishes the plan on ``/api/{side}_arm/joint_cmd`` at ``--rate``
-(50-77 Hz). It stops smoothly (jerk-limited, inside the limits) on Ctrl-C, on an error, when joint states stop for
-``--state-timeout`` and when the arm lags a command by more than ``--tracking-error``. FILE is any trajectory
+(50-77 Hz). Before the first command it applies everything ``taplan check`` applies to FILE (the limits of every
+derivative, velocity steps, at 1 kHz and at the command rate; the clearance of the robot's own bodies and of
+``--scene``'s obstacles) and sends nothing when that fails (exit 1, the failing line, "nothing was sent"). It stops
+smoothly (jerk-limited, inside the limits) on Ctrl-C, on an error, when joint states stop for ``--state-timeout``
+and when the arm lags a command by more than ``--tracking-error``. Another node's disable (``/api/fsm/enable`` <= 0,
+or ``/fsm_state`` PAUSE after READY) ends the run at once, exit 1 "disabled by another node": no heartbeat
+re-enables the robot. A robot without ``/fsm_state`` is not driven unless ``--no-fsm``. FILE is any trajectory
 ``taplan plan`` writes (it must start at the robot's current position). ``--targets FILE|-`` instead streams live
 targets for ``--duration`` seconds (JSON lines of joint or pose targets, see :mod:`taplan.ros.targets`) through the
 jerk-limited joint or pose streamer; ``--hold SECONDS`` holds the current position (a heartbeat test). Writes what
@@ -37,12 +42,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="fuse the wrist depth cameras (recorded with --bag); stop smoothly when their images stop",
     )
     parser.add_argument("--camera-timeout", type=float, default=1.0, help="--cameras: stale after this long [s]")
+    parser.add_argument(
+        "--no-fsm", action="store_true", help="drive a robot without /fsm_state, unconfirmed (default: refuse)"
+    )
+    parser.add_argument(
+        "--command-velocity",
+        choices=("zero", "feedforward", "feedback"),
+        default="zero",
+        help="JointState.velocity of each command: zero (default: the v2 robot reads positions only), the plan's "
+        "(feedforward) or the guide's P form (feedback)",
+    )
+    parser.add_argument("--scene", default=None, help="also check clearance to this scene's obstacles (.yaml/.json)")
 
 
 def run(args: argparse.Namespace) -> int:
     from taplan.errors import InvalidInputError
     from taplan.robot import Robot
-    from taplan.ros.runner import Runner, RunnerConfig
+    from taplan.ros.runner import CheckFailedError, Runner, RunnerConfig
     from taplan.trajectory import Trajectory
 
     modes = [x is not None for x in (args.file, args.hold, args.targets)]
@@ -59,21 +75,38 @@ def run(args: argparse.Namespace) -> int:
         tracking_error=args.tracking_error,
         wait_timeout=args.wait,
         disable=args.disable,
+        require_fsm=not args.no_fsm,
+        command_velocity=args.command_velocity,
     )
-    interface, bag = open_transport(args)
     robot = Robot.teleavatar()
+    world = None
+    if args.scene is not None:
+        from taplan.scene import CollisionWorld, load_scene
+
+        world = CollisionWorld(robot, load_scene(args.scene))
+    interface, bag = open_transport(args)
 
     def progress(t: float, _: float | None) -> None:
         print(f"  t = {t:6.1f} s", flush=True)
 
     try:
         runner = Runner(
-            interface, robot, config=config, on_progress=progress, monitors=_camera_monitors(args, interface, robot)
+            interface,
+            robot,
+            config=config,
+            on_progress=progress,
+            monitors=_camera_monitors(args, interface, robot),
+            world=world,
         )
         print(f"taplan run: waiting for joint states on ROS_DOMAIN_ID {interface.domain_id}", flush=True)
         if trajectory is not None:
-            print(f"taplan run: executing {args.file} ({trajectory.duration:.2f} s) at {args.rate:g} Hz", flush=True)
-            result = runner.execute(trajectory)
+            print(f"taplan run: checking {args.file} ({trajectory.duration:.2f} s) before sending", flush=True)
+            try:
+                result = runner.execute(trajectory)
+            except CheckFailedError as exc:
+                print(exc.report)
+                print(f"taplan run: FAIL: {exc.line}: nothing was sent", flush=True)
+                return 1
         elif args.targets is not None:
             result = _stream_targets(runner, robot, args)
         else:
@@ -83,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
         if bag is not None:
             bag.close()
             print(f"wrote {bag.path} ({bag.count} messages)")
+    if runner.presend is not None:
+        print(f"taplan run: pre-send check PASS ({runner.presend.clearance.line()})", flush=True)
     print(
         f"taplan run: {result.status}: {result.reason}; {len(result.sent)} commands, {result.heartbeats} heartbeats, "
         f"max tracking error {result.max_tracking_error:.4f} rad, final error {result.final_error:.4f} rad",
@@ -108,7 +143,7 @@ def _stream_targets(runner, robot, args: argparse.Namespace):  # noqa: ANN001, A
         with open(args.targets) as probe:
             first = next((line for line in probe if line.strip()), None)
         if first is not None and parse_target(first, robot, start)[1] == "pose":
-            streamer = PoseStreamer(robot, runner.period, timeout=None)
+            streamer = PoseStreamer(robot, runner.period, timeout=None, scene=runner.world)  # IK avoids the torso too
     print(f"taplan run: streaming targets from {args.targets} for {args.duration:g} s at {args.rate:g} Hz", flush=True)
     result = runner.stream(feed, args.duration, streamer=streamer)
     if feed.skipped:

@@ -33,6 +33,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "interpolate (the seed simulator's linear interpolation between streamed commands)",
     )
     parser.add_argument(
+        "--refuse-out-of-range",
+        action="store_true",
+        help="refuse commands outside the hardware limits (default: clip them; either way they are logged and counted)",
+    )
+    parser.add_argument(
         "--stall-after", type=float, default=None, help="fault injection: stop joint_states after this many seconds"
     )
     parser.add_argument("--scene", default=None, help="what the simulated depth cameras see (.yaml/.json)")
@@ -61,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         motion_rate=bounded_rate(args.motion_rate, "--motion-rate", high=MAX_SIM_RATE),
         stall_after=args.stall_after,
         motion=args.motion,
+        refuse_out_of_range=args.refuse_out_of_range,
     )
     if args.depth and args.scene is None:
         raise InvalidInputError("--depth", "no --scene", "a scene file for the cameras to see (--scene FILE)")

@@ -23,7 +23,7 @@ from taplan.reference.replay import JointStateSamples
 from taplan.ros.msg_definitions import FSM_STATE_TOPIC, MESSAGE_DEFINITIONS
 from taplan.ros.sensor_fields import SENSOR_TYPES
 
-__all__ = ["BagWriter", "RecordedRun", "read_messages", "read_recording", "read_run"]
+__all__ = ["BagWriter", "OFFERED_QOS", "RecordedRun", "bag_files", "read_messages", "read_recording", "read_run"]
 
 
 def _ros_dict(msg_type: str, fields: dict[str, Any], stamp_ns: int) -> dict[str, Any]:
@@ -101,39 +101,187 @@ def _sensor_ros_dict(msg_type: str, fields: dict[str, Any], stamp_ns: int) -> di
     return out
 
 
-class BagWriter:
-    """Writes every recorded message into a rosbag2 MCAP file (a :class:`taplan.ros.dds.Recorder`).
+# rclpy's default publisher QoS (reliable, volatile, keep-last 10), as ``ros2 bag record`` stores the offered
+# profiles of a topic's publishers: rosbag2's YAML (history 1 = keep last, reliability 1 = reliable, durability 2 =
+# volatile, liveliness 1 = automatic, durations "infinite")
+_INFINITE = "\n    sec: 2147483647\n    nsec: 4294967295"
+OFFERED_QOS = (
+    "- history: 1\n  depth: 10\n  reliability: 1\n  durability: 2\n  deadline:"
+    + _INFINITE
+    + "\n  lifespan:"
+    + _INFINITE
+    + "\n  liveliness: 1\n  liveliness_lease_duration:"
+    + _INFINITE
+    + "\n  avoid_ros_namespace_conventions: false"
+)
+SPLIT_EVERY = 1.0  # [s] of log time per file of a bag directory: a killed recorder loses at most the last second
 
-    Args:
-        path: Output ``.mcap`` file (overwritten).
-    """
 
-    def __init__(self, path: str | Path) -> None:
-        from mcap_ros2.writer import Writer
+class _McapFile:
+    """One rosbag2 MCAP file: profile ros2, ``ros2msg`` schemas, ``cdr`` channels with ``offered_qos_profiles``."""
 
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._stream = open(self.path, "wb")  # noqa: SIM115 (closed in close())
-        self._writer = Writer(self._stream)
-        self._schemas: dict[str, Any] = {}
-        self.count = 0
+    def __init__(self, path: Path) -> None:
+        from mcap.writer import CompressionType, Writer
 
-    def record(self, topic: str, msg_type: str, fields: dict[str, Any], time_ns: int) -> None:
-        """Append one message logged at ``time_ns`` (wall clock, nanoseconds)."""
+        self.path = path
+        self._stream = open(path, "wb")  # noqa: SIM115 (closed in close())
+        self._writer = Writer(self._stream, compression=CompressionType.NONE)
+        self._writer.start(profile="ros2", library="taplan")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.counts: dict[str, int] = {}
+        self.start_ns: int | None = None
+        self.end_ns = 0
+
+    def write(self, topic: str, msg_type: str, data: bytes, time_ns: int) -> None:
         schema = self._schemas.get(msg_type)
         if schema is None:
-            if msg_type not in MESSAGE_DEFINITIONS:
-                raise ConfigError(f"cannot record {msg_type!r}; supported: {sorted(MESSAGE_DEFINITIONS)}")
-            definition = MESSAGE_DEFINITIONS[msg_type]
-            schema = self._schemas[msg_type] = self._writer.register_msgdef(msg_type, definition)
-        self._writer.write_message(topic, schema, _ros_dict(msg_type, fields, time_ns), log_time=int(time_ns))
-        self.count += 1
+            definition = MESSAGE_DEFINITIONS[msg_type].encode()
+            schema = self._schemas[msg_type] = self._writer.register_schema(msg_type, "ros2msg", definition)
+        channel = self._channels.get(topic)
+        if channel is None:
+            metadata = {"offered_qos_profiles": OFFERED_QOS}
+            channel = self._channels[topic] = self._writer.register_channel(topic, "cdr", schema, metadata)
+        self._writer.add_message(channel, log_time=time_ns, data=data, publish_time=time_ns)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+        self.start_ns = time_ns if self.start_ns is None else min(self.start_ns, time_ns)
+        self.end_ns = max(self.end_ns, time_ns)
 
     def close(self) -> None:
-        """Finish the MCAP file (its summary and index); the bag is unreadable before."""
         if not self._stream.closed:
             self._writer.finish()
             self._stream.close()
+
+
+class BagWriter:
+    """Writes every recorded message into a rosbag2 bag (a :class:`taplan.ros.dds.Recorder`).
+
+    ``path`` ending in ``.mcap``: one MCAP file (readable once closed). Any other ``path``: a rosbag2 *directory*
+    as ``ros2 bag record -s mcap`` writes it (``metadata.yaml`` + ``<name>_<i>.mcap``, storage ``mcap``,
+    serialization ``cdr``, ``offered_qos_profiles`` per topic), split every ``split`` seconds of log time: each
+    finished file is complete and listed in ``metadata.yaml`` at once, so a recorder killed with SIGKILL leaves a
+    bag that ROS 2 tools and rosbags open, up to its last finished second.
+
+    Messages are stored as the CDR bytes that went on the wire when the transport passes them (``data``), with the
+    log time the transport stamped them with; otherwise ``fields`` are serialised here.
+
+    Args:
+        path: ``.mcap`` file or bag directory (created; an existing directory must be empty).
+        split: Seconds of log time per file of a bag directory.
+    """
+
+    def __init__(self, path: str | Path, *, split: float = SPLIT_EVERY) -> None:
+        self.path = Path(path)
+        self.directory = self.path.suffix.lower() != ".mcap"
+        if not (isinstance(split, (int, float)) and math.isfinite(split) and split > 0):
+            raise InvalidInputError("split", split, "a positive duration [s]")
+        self.split_ns = int(split * 1e9)
+        if self.directory:
+            if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+                raise InvalidInputError("bag", str(self.path), "a new or empty directory (or a .mcap file)")
+            self.path.mkdir(parents=True, exist_ok=True)
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._done: list[_McapFile] = []
+        self._file: _McapFile | None = None
+        self._types: dict[str, str] = {}
+        self._encoders: dict[str, Any] = {}
+        self.count = 0
+        if self.directory:
+            self._write_metadata()
+
+    def _next_file(self) -> _McapFile:
+        if self.directory:
+            return _McapFile(self.path / f"{self.path.name}_{len(self._done)}.mcap")
+        return _McapFile(self.path)
+
+    def _encode(self, msg_type: str, fields: dict[str, Any], time_ns: int) -> bytes:
+        encoder = self._encoders.get(msg_type)
+        if encoder is None:
+            from mcap_ros2._dynamic import serialize_dynamic
+
+            encoder = self._encoders[msg_type] = serialize_dynamic(msg_type, MESSAGE_DEFINITIONS[msg_type])[msg_type]
+        return encoder(_ros_dict(msg_type, fields, time_ns))
+
+    def record(
+        self, topic: str, msg_type: str, fields: dict[str, Any], time_ns: int, data: bytes | None = None
+    ) -> None:
+        """Append one message logged at ``time_ns`` (wall clock [ns]): its wire bytes ``data``, else ``fields``."""
+        if msg_type not in MESSAGE_DEFINITIONS:
+            raise ConfigError(f"cannot record {msg_type!r}; supported: {sorted(MESSAGE_DEFINITIONS)}")
+        payload = self._encode(msg_type, fields, time_ns) if data is None else bytes(data)
+        current = self._file
+        if (
+            current is not None
+            and self.directory
+            and current.start_ns is not None
+            and time_ns - current.start_ns >= self.split_ns
+        ):
+            current.close()
+            self._done.append(current)
+            self._write_metadata()
+            current = None
+        if current is None:
+            current = self._file = self._next_file()
+        current.write(topic, msg_type, payload, int(time_ns))
+        self._types[topic] = msg_type
+        self.count += 1
+
+    def _write_metadata(self) -> None:
+        """``metadata.yaml`` of the finished files (rosbag2 format version 5), written atomically."""
+        files = [f for f in self._done if f.start_ns is not None]
+        counts: dict[str, int] = {}
+        for f in files:
+            for topic, n in f.counts.items():
+                counts[topic] = counts.get(topic, 0) + n
+        start = min((f.start_ns for f in files), default=0)  # type: ignore[type-var]
+        end = max((f.end_ns for f in files), default=0)
+        lines = [
+            "rosbag2_bagfile_information:",
+            "  version: 5",
+            "  storage_identifier: mcap",
+            f"  duration:\n    nanoseconds: {max(0, end - start)}",
+            f"  starting_time:\n    nanoseconds_since_epoch: {start}",
+            f"  message_count: {sum(counts.values())}",
+            "  topics_with_message_count:" + ("" if counts else " []"),
+        ]
+        qos = OFFERED_QOS.replace("\n", "\\n").replace('"', '\\"')
+        for topic, n in counts.items():
+            lines += [
+                "    - topic_metadata:",
+                f"        name: {topic}",
+                f"        type: {self._types[topic]}",
+                "        serialization_format: cdr",
+                f'        offered_qos_profiles: "{qos}"',
+                f"      message_count: {n}",
+            ]
+        lines += ['  compression_format: ""', '  compression_mode: ""']
+        lines.append("  relative_file_paths:" + ("" if files else " []"))
+        lines += [f"    - {f.path.name}" for f in files]
+        lines.append("  files:" + ("" if files else " []"))
+        for f in files:
+            lines += [
+                f"    - path: {f.path.name}",
+                f"      starting_time:\n        nanoseconds_since_epoch: {f.start_ns}",
+                f"      duration:\n        nanoseconds: {f.end_ns - (f.start_ns or 0)}",
+                f"      message_count: {sum(f.counts.values())}",
+            ]
+        temporary = self.path / "metadata.yaml.tmp"
+        temporary.write_text("\n".join(lines) + "\n")
+        temporary.replace(self.path / "metadata.yaml")
+
+    def close(self) -> None:
+        """Finish the current file (its summary and index) and, for a directory, ``metadata.yaml``."""
+        if self._file is not None:
+            self._file.close()
+            self._done.append(self._file)
+            self._file = None
+        elif not self.directory and not self._done:  # an empty .mcap file is still a valid bag
+            empty = self._next_file()
+            empty.close()
+            self._done.append(empty)
+        if self.directory:
+            self._write_metadata()
 
     def __enter__(self) -> BagWriter:
         return self
@@ -142,23 +290,40 @@ class BagWriter:
         self.close()
 
 
+def bag_files(path: str | Path) -> list[Path]:
+    """The MCAP files of a bag: the file itself, or those ``metadata.yaml`` of a bag directory lists."""
+    path = Path(path)
+    if path.is_dir():
+        metadata = path / "metadata.yaml"
+        if not metadata.is_file():
+            raise InvalidInputError("bag", str(path), "a rosbag2 directory with metadata.yaml, or a .mcap file")
+        import yaml
+
+        info = yaml.safe_load(metadata.read_text()).get("rosbag2_bagfile_information", {})
+        return [path / name for name in info.get("relative_file_paths") or []]
+    if not path.is_file():
+        raise InvalidInputError("bag", str(path), "an existing .mcap file or rosbag2 directory")
+    return [path]
+
+
 def read_messages(path: str | Path, topics: list[str] | None = None) -> list[tuple[str, int, Any]]:
     """``(topic, log time [ns], decoded message)`` of every message in the bag, in log-time order."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    path = Path(path)
-    if not path.is_file():
-        raise InvalidInputError("bag", str(path), "an existing .mcap file")
-    try:
-        with open(path, "rb") as stream:
-            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            decoded = reader.iter_decoded_messages(topics=topics, log_time_order=True)
-            return [(channel.topic, message.log_time, msg) for _, channel, message, msg in decoded]
-    except Exception as exc:  # the mcap readers raise many kinds on a damaged file
-        raise InvalidInputError(
-            "bag", str(path), f"a readable rosbag2 MCAP file ({type(exc).__name__}: {exc})"
-        ) from exc
+    out: list[tuple[str, int, Any]] = []
+    for file in bag_files(path):
+        try:
+            with open(file, "rb") as stream:
+                reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+                decoded = reader.iter_decoded_messages(topics=topics, log_time_order=True)
+                out += [(channel.topic, message.log_time, msg) for _, channel, message, msg in decoded]
+        except Exception as exc:  # the mcap readers raise many kinds on a damaged file
+            raise InvalidInputError(
+                "bag", str(file), f"a readable rosbag2 MCAP file ({type(exc).__name__}: {exc})"
+            ) from exc
+    out.sort(key=lambda m: m[1])
+    return out
 
 
 @dataclass
@@ -191,8 +356,9 @@ class RecordedRun:
     def stream(self, kind: str) -> JointStateSamples:
         """Both arms' ``"commanded"`` or ``"measured"`` stream on the first arm's times.
 
-        Each message of the other arm is paired with the first arm's message nearest in log time (a client sends
-        both arms' commands in the same tick); interpolating would add position noise from the log times' jitter.
+        Each message of the other arm is paired with the first arm's message sent in the same tick: in order when
+        both arms have the same number of messages (±1) at matching times (a client sends both arms' commands in one
+        tick), else the one nearest in log time; interpolating would add position noise from the log times' jitter.
         """
         streams = self.commanded if kind == "commanded" else self.measured
         if not streams:
@@ -201,12 +367,22 @@ class RecordedRun:
         base = streams[sides[0]]
         positions = [base.positions]
         names: list[str] = list(base.joint_names or ())
+        times = base.times
         for side in sides[1:]:
             other = streams[side]
-            positions.append(other.positions[_nearest(other.times, base.times)])
+            n = min(len(times), len(other.times))
+            offsets = np.abs(other.times[:n] - times[:n])
+            if abs(len(other.times) - len(times)) <= 1 and np.median(offsets) < 0.25 / base.rate:
+                # sent in pairs (one tick, both arms): pair them in order. Nearest log time mispairs them when a
+                # loaded sender is preempted between the two writes for more than half a period
+                positions = [p[:n] for p in positions]
+                times = times[:n]
+                positions.append(other.positions[:n])
+            else:
+                positions.append(other.positions[_nearest(other.times, times)])
             names += list(other.joint_names or ())
         q = np.hstack(positions)
-        return JointStateSamples(base.times, q, np.full_like(q, np.nan), base.rate, None, tuple(names))
+        return JointStateSamples(times, q, np.full_like(q, np.nan), base.rate, None, tuple(names))
 
 
 def _nearest(times: np.ndarray, at: np.ndarray) -> np.ndarray:

@@ -25,6 +25,13 @@ logger = logging.getLogger(__name__)
 
 MAX_DOMAIN_ID = 232  # the largest id whose RTPS ports are valid (ROS 2's documented range is 0-101 and 215-232)
 RELIABLE_BLOCKING = 0.1  # [s] a reliable write blocks at most this long on a full history (rclpy's default 0.1 s)
+# Cyclone keeps a deleted reliable writer with unacknowledged data alive up to WriterLingerDuration (default 1 s),
+# one writer after the other: after the robot side crashed, closing taplan's 3 writers took 3 s. 0.1 s still
+# retransmits to a live reader (the last commands, a final disable) and bounds the exit to ~0.3 s.
+WRITER_LINGER = (
+    "<CycloneDDS><Domain Id='any'><Internal><WriterLingerDuration>0.1 s</WriterLingerDuration></Internal></Domain>"
+    "</CycloneDDS>"
+)
 
 
 class DdsUnavailableError(ConfigError, ImportError):
@@ -34,7 +41,9 @@ class DdsUnavailableError(ConfigError, ImportError):
 class Recorder(Protocol):
     """Receives every message the interface publishes or takes (e.g. :class:`taplan.ros.bag.BagWriter`)."""
 
-    def record(self, topic: str, msg_type: str, fields: dict[str, Any], time_ns: int) -> None: ...
+    def record(
+        self, topic: str, msg_type: str, fields: dict[str, Any], time_ns: int, data: bytes | None = None
+    ) -> None: ...
 
 
 def domain_id_from_environment(default: int = 0) -> int:
@@ -101,11 +110,16 @@ class _Publisher:
 
     def publish(self, fields: dict[str, Any]) -> None:
         interface = self._interface
-        stamp = fields.get("stamp", time.time())  # a JointState's header stamp [s]: now unless given
-        self._writer.write(interface.messages.to_idl(self.msg_type, fields, stamp))
+        now_ns = time.time_ns()
+        stamp = fields.get("stamp", now_ns * 1e-9)  # a JointState's header stamp [s]: now unless given
+        sample = interface.messages.to_idl(self.msg_type, fields, stamp)
+        if interface.recorder is None:
+            self._writer.write(sample)
+        else:  # record the bytes and the time that went on the wire, not a re-stamped copy
+            data = sample.serialize()
+            self._writer.write(sample)
+            interface.recorder.record(self.topic, self.msg_type, fields, now_ns, data)
         self.count += 1
-        if interface.recorder is not None:
-            interface.recorder.record(self.topic, self.msg_type, fields, time.time_ns())
 
     def matched(self) -> int:
         """How many subscribers are matched (discovered) now."""
@@ -148,8 +162,10 @@ class DdsInterface:
         self.domain_id = domain_id_from_environment() if domain_id is None else _domain_id(domain_id, "domain_id")
         self.recorder = recorder
         self._dds = dds
-        if config is not None:
-            _configure_domain(dds, self.domain_id, config)
+        if config is None:  # the environment's configuration (as Cyclone reads it), plus the writer linger
+            config = os.environ.get("CYCLONEDDS_URI", "").strip()
+        config = f"{config},{WRITER_LINGER}" if config else WRITER_LINGER
+        _configure_domain(dds, self.domain_id, config)
         self.participant = dds.domain.DomainParticipant(self.domain_id)
         policy = dds.qos.Policy
         self.qos = dds.qos.Qos(
@@ -197,7 +213,7 @@ class DdsInterface:
                 taken += 1
                 sub.count += 1
                 if recorder is not None:
-                    recorder.record(sub.topic, sub.msg_type, fields, time.time_ns())
+                    recorder.record(sub.topic, sub.msg_type, fields, time.time_ns(), sample.serialize())
                 for callback in sub.callbacks:
                     callback(fields)
         return taken

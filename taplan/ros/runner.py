@@ -3,10 +3,17 @@
 :class:`Runner` waits for ``/{side}_arm/joint_states`` of both arms, then publishes ``/api/{side}_arm/joint_cmd`` at
 the arm rate (50-77 Hz) and the ``/api/fsm/enable`` heartbeat at 20 Hz, and watches the measured state:
 
-* **Tracking.** The measured position must stay within ``tracking_error`` of the command sent one period earlier;
-  beyond it the run is aborted.
-* **Stall.** No joint state for ``state_timeout`` (200 ms): the run stops.
+* **Tracking.** The measured position must stay within ``tracking_error`` of the command sent one period before it
+  arrived; beyond it the run is aborted.
+* **Stall.** Joint states older than ``stale_periods`` (5) of the robot's measured publishing period (>= 200 ms, at
+  most ``state_timeout``): the run stops, naming the stall and how old the last state is.
 * **Ctrl-C / exceptions** (``KeyboardInterrupt`` or any error raised while running): the run stops.
+* **An outside disable wins.** The runner reads ``/api/fsm/enable`` from every writer and ``/fsm_state``: a
+  disable (<= 0) it did not send, or a PAUSE (0) after READY, ends the run at once with status ``"disabled"``
+  ("disabled by another node"): no further heartbeat (it would re-enable the robot), no command, no brake (the
+  robot is paused). Only a new :meth:`Runner.execute` / :meth:`Runner.stream` call enables it again.
+* **No /fsm_state, no motion.** A robot that publishes no ``/fsm_state`` within ``ready_timeout`` is not driven
+  (nothing moved) unless ``RunnerConfig(require_fsm=False)`` (``taplan run --no-fsm``) says to drive it unconfirmed.
 
 Stopping is smooth: a :class:`~taplan.stream.JointStreamer` is reset to the last command's position, velocity and
 acceleration and brakes to rest, jerk-limited and inside the limits; the braking commands are published at the arm
@@ -19,7 +26,9 @@ The runner uses the wall clock and sleeps; everything else in taplan stays clock
 
 from __future__ import annotations
 
+import bisect
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,8 +37,12 @@ from typing import Any
 import numpy as np
 
 from taplan import api
-from taplan.errors import InvalidInputError, TaplanError, UnknownNameError
+from taplan.check import Report, Thresholds, check
+from taplan.clearance import SELF_CLEARANCE, check_clearance, robot_world
+from taplan.errors import CollisionError, InvalidInputError, TaplanError, UnknownNameError
 from taplan.limits import JointLimits
+from taplan.planning.verify import check_segment
+from taplan.reference.replay import JointStateSamples
 from taplan.robot import Robot
 from taplan.ros.interface import RosInterface
 from taplan.ros.msg_definitions import FSM_STATE_TOPIC, INT32
@@ -37,16 +50,60 @@ from taplan.stream.joint_streamer import JointStreamer
 from taplan.stream.state import StreamStatus
 from taplan.trajectory import Trajectory
 
-__all__ = ["RunnerConfig", "RunResult", "Runner", "RunError"]
+__all__ = ["RunnerConfig", "RunResult", "Runner", "RunError", "CheckFailedError", "PreSendCheck"]
 
 logger = logging.getLogger(__name__)
 
 
+STREAM_MARGIN = 0.005  # [m] a streamed command closer than this (above the clearance) to a collision stops the stream
+COMMAND_VELOCITIES = ("zero", "feedforward", "feedback")
+MIN_STALE = 0.2  # [s] never stale sooner: a loaded 2-core machine delays a 100 Hz stream by 130 ms (measured)
+PAUSE = 0  # /fsm_state value of a paused robot (an operator's or a supervisor's disable, or no heartbeat)
 READY = 2  # /fsm_state value of a robot that follows commands
 
 
 class RunError(TaplanError):
     """The run cannot start (no joint states, a plan that does not start where the robot is, limits)."""
+
+
+class CheckFailedError(RunError):
+    """The plan fails the pre-send check (``taplan check``'s limits, the commands, collision): nothing was sent.
+
+    Attributes:
+        line: The first failing line.
+        report: Every check's lines (the reports' tables and the collision line).
+    """
+
+    def __init__(self, line: str, report: str) -> None:
+        super().__init__(f"pre-send check FAIL: {line}: nothing was sent")
+        self.line = line
+        self.report = report
+
+
+@dataclass(frozen=True)
+class PreSendCheck:
+    """What :meth:`Runner.check_plan` found: the plan as ``taplan check`` judges it (``plan``), the commands the
+    runner would send at its rate (``commands``, hardware limits, velocity steps at the command period) and the
+    clearance of the robot's own bodies plus the scene (``clearance``)."""
+
+    plan: Any
+    commands: Any
+    clearance: Any
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.plan.passed and self.commands.passed and self.clearance.passed)
+
+    @property
+    def failures(self) -> list[str]:
+        out = [f"plan: {f}" for f in self.plan.failures]
+        out += [f"commands: {f}" for f in self.commands.failures]
+        if not self.clearance.passed:
+            out.append(self.clearance.line())
+        return out
+
+    def table(self) -> str:
+        return "\n".join([self.plan.table(), self.commands.table(), self.clearance.line()])
 
 
 @dataclass(frozen=True)
@@ -56,12 +113,27 @@ class RunnerConfig:
     Attributes:
         rate: ``joint_cmd`` rate [Hz], in the guide's 50-77.
         heartbeat_rate: ``/api/fsm/enable`` rate [Hz].
-        state_timeout: Stop when no joint state arrived for this long [s].
+        state_timeout: Stop when no joint state arrived for this long [s] (the ceiling; see ``stale_periods``).
+        stale_periods: Stop when the joint states are older than this many of the robot's measured publishing
+            periods (at least ``MIN_STALE``, 200 ms): a stall is named by its age, before the tracking
+            error it causes.
         tracking_error: Abort when |measured - commanded| exceeds this [rad] on any joint.
         start_tolerance: A plan must start within this of the measured position [rad].
         wait_timeout: How long to wait for the first joint states [s].
         ready_timeout: How long to hold the measured position with heartbeats until ``/fsm_state`` reports READY
-            [s]; a robot that publishes no ``/fsm_state`` is driven after this wait, with a warning.
+            [s]. A robot that publishes no ``/fsm_state`` (the guide does not list it) is refused after this wait
+            (nothing moved) unless ``require_fsm`` is False.
+        command_velocity: What ``JointState.velocity`` of each command carries: ``"zero"`` (default),
+            ``"feedforward"`` (the plan's or streamer's velocity at the command) or ``"feedback"`` (the guide's P form
+            ``clip(kp (q_cmd - q_measured), ±0.3 v_max)``, :func:`taplan.api.feedback_velocity`). Zero is the default
+            because the v2 robot and the vendor simulator read ``position`` only (API_NOTES §4: "Clients send
+            velocity and effort as zeros"), so any other value is information the robot ignores, and the P form is
+            the v1 relay's velocity command: on a robot that does read it, it would add a second, unplanned
+            controller. ``taplan sim`` reads positions only under all three; ``taplan check`` of a bag judges
+            the commanded positions (their finite differences), never the velocity field.
+        require_fsm: Drive only a robot whose ``/fsm_state`` reported READY. False (``taplan run --no-fsm``)
+            drives a robot without ``/fsm_state`` after ``ready_timeout``, unconfirmed, with a warning; an outside
+            disable is then seen only on ``/api/fsm/enable``.
         settle_time: After a plan's end, keep commanding its last point up to this long until the arm is within
             ``goal_tolerance`` [s].
         goal_tolerance: [rad].
@@ -71,6 +143,7 @@ class RunnerConfig:
     rate: float = 77.0
     heartbeat_rate: float = api.HEARTBEAT_RATE
     state_timeout: float = 0.2
+    stale_periods: float = 5.0
     tracking_error: float = 0.15
     start_tolerance: float = 0.05
     wait_timeout: float = 5.0
@@ -78,6 +151,8 @@ class RunnerConfig:
     settle_time: float = 1.0
     goal_tolerance: float = 0.01
     disable: bool = False
+    require_fsm: bool = True
+    command_velocity: str = "zero"
 
 
 @dataclass
@@ -85,15 +160,16 @@ class RunResult:
     """What happened.
 
     Attributes:
-        status: ``"completed"``, ``"stopped"`` (stall, Ctrl-C, an error: braked to rest) or ``"aborted"`` (tracking
-            error: braked to rest).
+        status: ``"completed"``, ``"stopped"`` (stall, Ctrl-C, an error: braked to rest), ``"aborted"`` (tracking
+            error: braked to rest) or ``"disabled"`` (another node disabled the robot: no command and no heartbeat
+            was sent after it was seen).
         reason: Why it ended.
         sent_times: Times of the commands [s] from the start, shape (k,).
         sent: Commanded positions [rad], shape (k, 14), model order.
         measured_times: Receive times of joint states [s], shape (m,).
         measured: Measured positions [rad], shape (m, 14).
         heartbeats: Number of heartbeats sent.
-        max_tracking_error: Largest |measured - previous command| seen [rad].
+        max_tracking_error: Largest |measured - the command sent one period before it arrived| seen [rad].
         final_error: |measured - last command| at the end [rad] (max over joints), NaN if unknown.
         rejected_states: Joint states that were malformed (names, lengths, NaN) or out of order.
     """
@@ -150,6 +226,10 @@ class Runner:
         monitors: Called every period while moving; one that returns a reason (a string) stops the run smoothly
             with that reason (e.g. :meth:`taplan.ros.perception_link.PerceptionLink.monitor`: a broken camera
             stream).
+        world: The :class:`~taplan.scene.CollisionWorld` every plan and streamed command is checked against
+            (default the robot's own bodies; pass one with a scene to add its obstacles).
+        clearance: Required clearance of the world's pairs [m] (default
+            :data:`~taplan.clearance.SELF_CLEARANCE`).
     """
 
     def __init__(
@@ -163,15 +243,22 @@ class Runner:
         sleep: Callable[[float], None] = time.sleep,
         on_progress: Callable[[float, float | None], None] | None = None,
         monitors: tuple[Callable[[], str | None], ...] = (),
+        world: Any = None,
+        clearance: float = SELF_CLEARANCE,
     ) -> None:
         self.interface: RosInterface = interface
         self.monitors = tuple(monitors)
+        self.world = robot_world(robot if world is None else world)
+        self.presend: PreSendCheck | None = None  # the last plan's pre-send check
+        self.clearance = float(clearance)
         self.robot = robot
         self.config = config or RunnerConfig()
         self.limits = robot.planning_limits if limits is None else limits
         lo, hi = api.ARM_RATE_RANGE
         if not lo <= self.config.rate <= hi:
             raise InvalidInputError("rate", self.config.rate, f"a rate in [{lo:g}, {hi:g}] Hz")
+        if self.config.command_velocity not in COMMAND_VELOCITIES:
+            raise InvalidInputError("command_velocity", self.config.command_velocity, f"one of {COMMAND_VELOCITIES}")
         self.period = 1.0 / self.config.rate
         self.clock = clock
         self.sleep = sleep
@@ -180,35 +267,80 @@ class Runner:
         self._latest: dict[str, tuple[float, np.ndarray]] = {}
         self._stamps: dict[str, float] = {}
         self.rejected_states = 0
+        self.last_rejection = ""
+        self._rejection_logged = -np.inf
+        self._state_period: dict[str, float] = {}
         self._commands = {s: interface.create_publisher(api.JOINT_STATE, api.Topics.joint_cmd(s)) for s in api.SIDES}
         self._enable = interface.create_publisher(api.FLOAT32, api.Topics.ENABLE)
         self.fsm_state: int | None = None
+        self.outside_disable: str | None = None  # why another node's disable ended the run, once seen
+        self._own_disables = 0  # our own -1s still to come back on /api/fsm/enable (a reader sees local writers)
+        self._watch_fsm = False  # READY seen in this run: a PAUSE from now on was not caused by us
         interface.create_subscription(INT32, FSM_STATE_TOPIC, self._on_fsm)
+        interface.create_subscription(api.FLOAT32, api.Topics.ENABLE, self._on_enable)
         for side in api.SIDES:
             interface.create_subscription(api.JOINT_STATE, api.Topics.joint_states(side), self._on_state(side))
 
     # ------------------------------------------------------------------------------------------------- inputs
     def _on_fsm(self, fields: dict[str, Any]) -> None:
         self.fsm_state = int(fields.get("data", -1))
+        if self._watch_fsm and self.fsm_state == PAUSE and self.outside_disable is None:
+            self.outside_disable = "disabled by another node: the robot's FSM went to PAUSE (0) while taplan drove it"
+
+    def _on_enable(self, fields: dict[str, Any]) -> None:
+        """``/api/fsm/enable`` from every writer: a disable (<= 0) that is not ours ends the run."""
+        value = float(fields.get("data", np.nan))
+        if not np.isfinite(value) or value > 0:
+            return
+        if self._own_disables > 0:
+            self._own_disables -= 1
+            return
+        if self.outside_disable is None:
+            self.outside_disable = f"disabled by another node (/api/fsm/enable {value:g})"
+
+    def _send_disable(self) -> None:
+        self._own_disables += 1
+        self._enable.publish(api.fsm_enable(False).fields)
 
     def _on_state(self, side: str) -> Callable[[dict[str, Any]], None]:
         def callback(fields: dict[str, Any]) -> None:
             try:
                 q = api.parse_joint_state(side, fields.get("name", []), fields.get("position", []))
             except (InvalidInputError, UnknownNameError) as exc:
-                self.rejected_states += 1
-                logger.warning("ignoring a /%s_arm/joint_states message: %s", side, exc)
+                self._reject_state(side, str(exc))
                 return
             stamp = fields.get("stamp")
             if stamp is not None and stamp > 0 and stamp < self._stamps.get(side, -np.inf):
-                self.rejected_states += 1
-                logger.warning("ignoring a /%s_arm/joint_states message stamped before the previous one", side)
+                self._reject_state(side, "stamped before the previous one")
                 return
             if stamp is not None:
                 self._stamps[side] = stamp
-            self._latest[side] = (self.clock(), q)
+            now = self.clock()
+            previous = self._latest.get(side)
+            if previous is not None and now > previous[0]:  # the robot's publishing period, smoothed
+                gap = now - previous[0]
+                old = self._state_period.get(side)
+                self._state_period[side] = gap if old is None else 0.9 * old + 0.1 * min(gap, 4 * old)
+            self._latest[side] = (now, q)
 
         return callback
+
+    def _reject_state(self, side: str, why: str) -> None:
+        """Count a rejected joint state; warn once a second at most (a stream of bad messages is one line)."""
+        self.rejected_states += 1
+        self.last_rejection = f"/{side}_arm/joint_states: {why}"
+        now = self.clock()
+        if now - self._rejection_logged >= 1.0:
+            self._rejection_logged = now
+            logger.warning("ignoring %s (%d rejected so far)", self.last_rejection, self.rejected_states)
+
+    def stale_after(self) -> float:
+        """How old the joint states may get [s]: ``stale_periods`` of the robot's measured publishing period
+        (at least ``MIN_STALE``), at most ``state_timeout``."""
+        if len(self._state_period) < len(api.SIDES):
+            return self.config.state_timeout
+        period = max(self._state_period.values())
+        return min(self.config.state_timeout, max(MIN_STALE, self.config.stale_periods * period))
 
     def measured(self) -> tuple[float, np.ndarray] | None:
         """(age of the older arm's state [s], positions (14,)) or None before both arms reported."""
@@ -235,6 +367,12 @@ class Runner:
                 return state[1]
             if self.clock() >= end:
                 missing = [s for s in api.SIDES if s not in self._latest]
+                if self.rejected_states:
+                    raise RunError(
+                        f"no joint states from {missing or 'both arms (stale)'} within {self.config.wait_timeout:g} "
+                        f"s that taplan could use: {self.rejected_states} arrived and were rejected (last: "
+                        f"{self.last_rejection})"
+                    )
                 raise RunError(
                     f"no joint states from {missing or 'both arms (stale)'} within {self.config.wait_timeout:g} s: "
                     "is the robot (or `taplan sim`) running on this ROS_DOMAIN_ID?"
@@ -248,18 +386,29 @@ class Runner:
             RunError: The FSM reported a state but not READY within ``ready_timeout``.
         """
         self._check_commands(hold[None, :])
+        self.interface.spin_once()  # type: ignore[attr-defined]
+        self.outside_disable = None  # a new command from the user: an earlier disable is not this run's
+        self._watch_fsm = False
         end = self.clock() + self.config.ready_timeout
         next_beat = next_command = self.clock()
         while True:
             now = self.clock()
             self.interface.spin_once()  # type: ignore[attr-defined]
+            if self.outside_disable is not None:
+                raise RunError(f"{self.outside_disable} while enabling: nothing was moved")
             if self.fsm_state == READY:
+                self._watch_fsm = True
                 return
             state = self.measured()
             if state is None or state[0] > self.config.state_timeout:
                 raise RunError("joint states stopped while enabling the robot: nothing was moved")
             if now >= end:
                 if self.fsm_state is None:
+                    if self.config.require_fsm:
+                        raise RunError(
+                            f"the robot published no /fsm_state within {self.config.ready_timeout:g} s, so taplan "
+                            "cannot confirm it follows: nothing was moved (--no-fsm drives it unconfirmed)"
+                        )
                     logger.warning("no /fsm_state within %.1f s: driving without it", self.config.ready_timeout)
                     return
                 raise RunError(f"the robot's FSM is in state {self.fsm_state}, not READY (2), after enabling")
@@ -274,19 +423,20 @@ class Runner:
 
     # ---------------------------------------------------------------------------------------------- execution
     def execute(self, trajectory: Trajectory) -> RunResult:
-        """Run ``trajectory`` (its joints by name; other joints hold their measured positions) at the arm rate."""
+        """Run ``trajectory`` (its joints by name; other joints hold their measured positions) at the arm rate.
+
+        Nothing is sent before :meth:`check_plan` passes.
+
+        Raises:
+            CheckFailedError: The plan fails the pre-send check (nothing was sent).
+            RunError: No joint states, or the plan does not start at the measured position.
+        """
         start_q = self.wait_for_state()
-        names = trajectory.joint_names
-        unknown = [n for n in names if n not in self.robot.joint_names]
-        if unknown:
-            raise UnknownNameError("trajectory joint", unknown[0], self.robot.joint_names)
-        index = self.robot.indices(names)
-        times = np.arange(0.0, trajectory.duration + 1e-12, self.period)
-        if times[-1] < trajectory.duration:
-            times = np.append(times, trajectory.duration)
-        commands = np.repeat(start_q[None, :], len(times), axis=0)
-        commands[:, index] = trajectory(times + trajectory.times[0])
-        self._check_commands(commands)
+        presend = self.presend = self.check_plan(trajectory, start_q)
+        if not presend.passed:
+            raise CheckFailedError(presend.failures[0], presend.table())
+        index = self.robot.indices(trajectory.joint_names)
+        times, commands = self._command_grid(trajectory, start_q)
         offset = np.abs(commands[0] - start_q)
         if offset.max() > self.config.start_tolerance:
             j = int(np.argmax(offset))
@@ -300,6 +450,51 @@ class Runner:
         velocity[:, index] = trajectory(times + trajectory.times[0], 1)
         acceleration[:, index] = trajectory(times + trajectory.times[0], 2)
         return self._drive(lambda k: (commands[k], velocity[k], acceleration[k]) if k < len(times) else None)
+
+    def _command_grid(self, trajectory: Trajectory, hold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The command times [s] from the start and the commands (k, nq) the runner sends for ``trajectory``."""
+        names = trajectory.joint_names
+        unknown = [n for n in names if n not in self.robot.joint_names]
+        if unknown:
+            raise UnknownNameError("trajectory joint", unknown[0], self.robot.joint_names)
+        times = np.arange(0.0, trajectory.duration + 1e-12, self.period)
+        if times[-1] < trajectory.duration:
+            times = np.append(times, trajectory.duration)
+        commands = np.repeat(np.asarray(hold, dtype=float)[None, :], len(times), axis=0)
+        commands[:, self.robot.indices(names)] = trajectory(times + trajectory.times[0])
+        return times, commands
+
+    def check_plan(self, trajectory: Trajectory, hold: np.ndarray | None = None) -> PreSendCheck:
+        """Everything ``taplan check`` applies, before anything is sent.
+
+        * the plan itself against the hardware limits (:func:`taplan.check.check`: velocity, acceleration, jerk,
+          velocity steps, positions), as ``taplan check FILE`` does;
+        * the commands at the arm rate (what the robot's position loop receives): their finite-difference
+          velocity, acceleration, jerk and velocity steps against the hardware limits at the command period, and
+          the positions;
+        * the clearance of the robot's own bodies (and the scene of ``world``), certified along the whole plan.
+
+        Args:
+            trajectory: The plan (joints by name).
+            hold: Positions [rad] (nq,) of the joints the plan does not drive (default the robot's home).
+        """
+        hold = self.robot.home if hold is None else np.asarray(hold, dtype=float)
+        names = trajectory.joint_names
+        plan_report = check(trajectory, self.robot.limits.subset(names), name="plan", clearance=None)
+        times, commands = self._command_grid(trajectory, hold)
+        if len(times) < 2:  # a plan shorter than one period: the command stream holds its only point
+            times, commands = np.append(times, self.period), np.vstack([commands, commands])
+        samples = JointStateSamples(
+            times, commands, np.full_like(commands, np.nan), self.config.rate, None, self.robot.joint_names
+        )
+        # the commands' limits and steps; their timing (a shorter last period to end on the plan's end) is not theirs
+        # to judge: the runner's own timing is measured while it runs
+        untimed = Thresholds(jitter_tolerance=math.inf, gap_factor=math.inf)
+        stream_report: Report = check(
+            samples, self.robot.limits, thresholds=untimed, name=f"commands at {self.config.rate:g} Hz", clearance=None
+        )
+        clearance = check_clearance(trajectory, self.world, hold=hold, floor=self.clearance)
+        return PreSendCheck(plan_report, stream_report, clearance)
 
     def stream(
         self,
@@ -328,6 +523,8 @@ class Runner:
             initial = streamer.reset(start_q)
         self.arm(np.asarray(initial.position))
         steps = int(np.ceil(duration / self.period))
+        joint_targets = isinstance(streamer, JointStreamer)
+        last = [np.asarray(initial.position, dtype=float)]  # the last command (the start of a new target's path)
 
         def command(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
             if k >= steps:
@@ -335,13 +532,46 @@ class Runner:
             target = targets(k * self.period)
             if target is not None:
                 try:
+                    if joint_targets:
+                        self._check_target(target, last[0])
                     streamer.set_target(target)
                 except TaplanError as exc:
                     logger.warning("skipping a target: %s", exc)
             state = streamer.step()
+            self._guard(state.position)
+            last[0] = np.asarray(state.position, dtype=float)
             return state.position, state.velocity, state.acceleration
 
         return self._drive(command)
+
+    def _check_target(self, target: Any, current: np.ndarray) -> None:
+        """A joint target in collision, or whose straight joint-space path from the current command is not certified
+        clear (:func:`~taplan.planning.check_segment`), is refused: the streamer keeps its previous target."""
+        q = np.asarray(target, dtype=float)
+        if q.shape != (self.robot.nq,) or not np.all(np.isfinite(q)):
+            return  # the streamer names the shape or NaN
+        q = np.clip(q, self.limits.lower, self.limits.upper)  # where the streamer's clamp puts it
+        d, pair = self.world.min_distance(q)
+        if d <= self.clearance:
+            raise CollisionError("target", pair, -d, self.clearance)
+        segment = check_segment(self.world, np.asarray(current, dtype=float), q, 2 * self.clearance)
+        if not segment.valid:
+            raise CollisionError("the path to the target", segment.pair, -segment.clearance, self.clearance)
+
+    def _guard(self, position: np.ndarray) -> None:
+        """Stop the stream before a command closer than ``STREAM_MARGIN`` to a collision is sent.
+
+        The last line of defence behind :meth:`_check_target` (a pose streamer's IK, or a joint stream that
+        curves off the straight path): the brake then starts from the last command sent, which was at least
+        ``STREAM_MARGIN`` clear; the brake itself (a few periods at the streamer's limits) is not certified.
+        """
+        d, pair = self.world.min_distance(position)
+        if d <= self.clearance + STREAM_MARGIN:
+            raise _StopRequestError(
+                "stopped",
+                f"the next streamed command puts {pair[0]} {d * 1e3:.1f} mm from {pair[1]} (required "
+                f"{(self.clearance + STREAM_MARGIN) * 1e3:.0f} mm): stopping before a collision",
+            )
 
     def _check_commands(self, commands: np.ndarray) -> None:
         lower, upper = self.robot.limits.lower, self.robot.limits.upper
@@ -353,10 +583,19 @@ class Runner:
                 f"limits [{lower[j]:.6g}, {upper[j]:.6g}]: nothing was sent"
             )
 
-    def _publish(self, q: np.ndarray, now: float, log: _Log) -> None:
+    def _publish(self, q: np.ndarray, now: float, log: _Log, velocity: np.ndarray | None = None) -> None:
         self._check_commands(q[None, :])
+        mode = self.config.command_velocity
+        measured = self.measured() if mode == "feedback" else None
         for side in api.SIDES:
-            self._commands[side].publish(api.joint_cmd(side, q[self.indices[side]]).fields)
+            index = self.indices[side]
+            if mode == "feedforward" and velocity is not None:
+                message = api.joint_cmd(side, q[index], convention="feedforward", velocity=velocity[index])
+            elif mode == "feedback" and measured is not None:
+                message = api.joint_cmd(side, q[index], convention="velocity_feedback", measured=measured[1][index])
+            else:  # "zero", a hold (no plan velocity) or no measurement yet
+                message = api.joint_cmd(side, q[index])
+            self._commands[side].publish(message.fields)
         log.sent_times.append(now)
         log.sent.append(q.copy())
 
@@ -367,7 +606,6 @@ class Runner:
         next_beat = t0
         beats = 0
         worst = 0.0
-        previous: np.ndarray | None = None
         state = (np.zeros(0),) * 3
         k = 0
         settle_until: float | None = None
@@ -377,6 +615,8 @@ class Runner:
             while True:
                 now = self.clock()
                 self.interface.spin_once()  # type: ignore[attr-defined]
+                if self.outside_disable is not None:
+                    raise _StopRequestError("disabled", self.outside_disable)
                 for monitor in self.monitors:
                     why = monitor()
                     if why:
@@ -387,10 +627,15 @@ class Runner:
                     if not log.measured_times or log.measured_times[-1] != self._latest_time():
                         log.measured_times.append(self._latest_time() - t0)
                         log.measured.append(q_meas)
-                    if age > cfg.state_timeout:
-                        raise _StopRequestError("stopped", f"no joint states for {age * 1e3:.0f} ms: stopping")
-                    if previous is not None:
-                        error = float(np.max(np.abs(q_meas - previous)))
+                    stale = self.stale_after()
+                    if age > stale:
+                        raise _StopRequestError("stopped", self._stall_reason(age))
+                    if log.sent:
+                        # the measurement against the command sent one period before it arrived, not before now:
+                        # late states of a stalled robot show their age, not a tracking error they did not have
+                        arrived = now - age - t0
+                        k_cmd = bisect.bisect_right(log.sent_times, arrived - self.period) - 1
+                        error = float(np.max(np.abs(q_meas - log.sent[k_cmd]))) if k_cmd >= 0 else 0.0
                         worst = max(worst, error)
                         if error > cfg.tracking_error:
                             raise _StopRequestError(
@@ -413,11 +658,10 @@ class Runner:
                         if now >= settle_until:
                             reason = f"plan finished; not within {cfg.goal_tolerance:g} rad after {cfg.settle_time:g} s"
                             break
-                        self._publish(state[0], now - t0, log)
+                        self._publish(state[0], now - t0, log, np.zeros_like(state[0]))
                     else:
                         state = nxt
-                        previous = log.sent[-1] if log.sent else None
-                        self._publish(state[0], now - t0, log)
+                        self._publish(state[0], now - t0, log, state[1])
                     k += 1
                 if self.on_progress is not None and now - last_progress >= 1.0:
                     last_progress = now
@@ -426,7 +670,8 @@ class Runner:
         except _StopRequestError as stop:
             status, reason = stop.status, stop.reason
             logger.warning(reason)
-            beats += self._brake(state, log, t0)
+            if status != "disabled":  # disabled from outside: not one more command or heartbeat
+                beats += self._brake(state, log, t0)
         except KeyboardInterrupt:
             status, reason = "stopped", "interrupted (Ctrl-C): stopping"
             logger.warning(reason)
@@ -435,8 +680,10 @@ class Runner:
             status, reason = "stopped", f"{type(exc).__name__}: {exc}: stopping"
             logger.error(reason)
             beats += self._brake(state, log, t0)
+        if self.outside_disable is not None and status != "disabled":
+            status, reason = "disabled", f"{self.outside_disable} (while stopping: {reason})"
         if cfg.disable:
-            self._enable.publish(api.fsm_enable(False).fields)
+            self._send_disable()
         final = self.measured()
         last = log.sent[-1] if log.sent else None
         final_error = float(np.max(np.abs(final[1] - last))) if final is not None and last is not None else np.nan
@@ -453,6 +700,13 @@ class Runner:
             final_error,
             self.rejected_states,
         )
+
+    def _stall_reason(self, age: float) -> str:
+        period = max(self._state_period.values(), default=float("nan"))
+        reason = f"no joint states for {age:.2f} s (they stopped; the robot published every {period * 1e3:.0f} ms)"
+        if self.rejected_states:
+            reason += f"; {self.rejected_states} were rejected (last: {self.last_rejection})"
+        return reason + ": stopping"
 
     def _latest_time(self) -> float:
         return max(t for t, _ in self._latest.values())
@@ -475,9 +729,13 @@ class Runner:
         next_beat = self.clock()
         for _ in range(int(10.0 / self.period)):
             tick = self.clock()
+            self.interface.spin_once()  # type: ignore[attr-defined]
+            if self.outside_disable is not None:  # another node disabled the robot: stop commanding at once
+                logger.warning(self.outside_disable)
+                break
             step = streamer.step()
             try:
-                self._publish(step.position, tick - t0, log)
+                self._publish(step.position, tick - t0, log, np.asarray(step.velocity, dtype=float))
             except TaplanError as exc:
                 logger.error("braking command refused: %s", exc)
                 break

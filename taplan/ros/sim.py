@@ -1,18 +1,21 @@
 """A simulated TeleAvatar on the other end of a :class:`~taplan.ros.RosInterface`: rehearse without the robot.
 
-It plays the robot's API mode: subscribes ``/api/{side}_arm/joint_cmd``, ``/api/fsm/enable`` and
-``/api/{side}_gripper/cmd``; publishes ``/{side}_arm/joint_states`` and ``/{side}_arm/current_ee_pose`` (default
-100 Hz, the real robot's rate) and ``/fsm_state`` (20 Hz). The rules are the guide's and the vendor simulator's
-(``API_NOTES.md`` §3-4):
+It plays the robot's API mode: subscribes ``/api/{side}_arm/joint_cmd``, ``/api/fsm/enable``,
+``/api/{side}_gripper/cmd`` and ``/api/fsm/adjust``; publishes ``/{side}_arm/joint_states`` and
+``/{side}_arm/current_ee_pose`` (default 100 Hz, the real robot's rate) and ``/fsm_state`` (20 Hz). The rules are
+the guide's and the vendor simulator's (``API_NOTES.md`` §3-4):
 
-* **FSM.** ``PAUSE`` (0) holds the latched position. A finite enable > 0 refreshes the heartbeat; from ``PAUSE`` it
+* **FSM.** ``PAUSE`` (0) holds the latched position. An enable of exactly 1.0 refreshes the heartbeat (the guide:
+  "send data=1.0 continuously"; any other positive value is rejected, logged and counted, and is no heartbeat); from
+  ``PAUSE`` it
   resets the target to the current position and enters ``SLOW_START`` (1), where the arm moves toward commands at
   ``slow_start_speed``; ``READY`` (2) follows once both arms have commanded since enabling and stayed within
   ``ready_tolerance`` of their targets for ``ready_cycles`` 20 Hz checks. An enable <= 0 pauses at once; no enable
   for ``heartbeat_timeout`` (1 s) force-pauses. Non-finite enables are ignored.
 * **Commands.** Exactly 7 finite positions; names empty (index order) or exactly the arm's 7 names in any order.
-  Anything else is rejected with a log line (and counted in ``rejected``). Targets are clipped to the hardware
-  limits, as the robot does. Commands while paused are ignored.
+  Anything else is rejected with a log line (and counted in ``rejected``). A target outside the hardware limits is
+  clipped to them and counted (``rejected["out_of_range"]``, a warning per second at most naming the joint and
+  value), or refused whole with ``refuse_out_of_range``. Commands while paused are ignored.
 * **Motion.** ``motion="joint"`` (default): the joint-mode model of :class:`taplan.reference.JointModeRobot`: each
   10 ms tick the arm moves to the latest target, at most the velocity ceiling times the tick.
   ``motion="interpolate"``: the seed simulator's linear branch applied to a command stream (each ``joint_cmd`` is a
@@ -20,6 +23,9 @@ It plays the robot's API mode: subscribes ``/api/{side}_arm/joint_cmd``, ``/api/
   previous command, clamped to [one motion tick, ``max_segment``]), the velocity ceiling still applying; with
   ``state_rate=10`` it publishes like the seed. A plan whose velocities jump shows the same steps here.
 * **Gripper.** Commands in [0, 1]; others are rejected.
+* **Adjust.** ``/api/fsm/adjust`` 1 enters ``ADJUST`` (3, taplan's number): the arms visit ``adjust_poses`` (default
+  home) at ``slow_start_speed``, commands and enables are ignored, no heartbeat is needed, and the FSM pauses on its
+  own when the routine is complete; -1 leaves it (PAUSE).
 
 Fault injection for tests: ``stall_after`` stops the joint_states after that time, as a frozen driver would.
 """
@@ -54,6 +60,7 @@ class FsmState(IntEnum):
     PAUSE = 0
     SLOW_START = 1
     READY = 2
+    ADJUST = 3  # taplan's number: the guide names ADJUST MODE but not its /fsm_state value
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,9 @@ class SimConfig:
         stall_after: Stop publishing joint states after this time [s] (fault injection), or None.
         motion: Motion model, ``"joint"`` or ``"interpolate"`` (see the module notes).
         max_segment: Longest interpolation segment of ``"interpolate"`` [s] (a command after a pause).
+        refuse_out_of_range: Refuse a command outside the hardware limits instead of clipping it (both counted).
+        adjust_poses: The ``/api/fsm/adjust`` routine's configurations (14,) in model order, visited in turn at
+            ``slow_start_speed`` (the robot reads ``robot.adjust_pose``; default: the robot's home).
     """
 
     state_rate: float = 100.0
@@ -83,6 +93,8 @@ class SimConfig:
     stall_after: float | None = None
     motion: str = "joint"
     max_segment: float = 0.1
+    refuse_out_of_range: bool = False
+    adjust_poses: tuple[tuple[float, ...], ...] | None = None
 
 
 MOTIONS = ("joint", "interpolate")
@@ -146,6 +158,7 @@ class SimulatedRobot:
         # "interpolate": per arm, (segment start positions, start time, duration), and the last command's time
         self._segments: dict[str, tuple[np.ndarray, float, float]] = {}
         self._last_command: dict[str, float] = {}
+        self._out_of_range_logged = -math.inf
         self._state_timer = _Every(self.config.state_rate)
         self._fsm_timer = _Every(self.config.fsm_rate)
         self._motion_timer = _Every(self.config.motion_rate)
@@ -156,6 +169,10 @@ class SimulatedRobot:
             interface.create_subscription(api.JOINT_STATE, api.Topics.joint_cmd(side), self._on_command(side))
             interface.create_subscription(api.FLOAT32, api.Topics.gripper(side), self._on_gripper(side))
         interface.create_subscription(api.FLOAT32, api.Topics.ENABLE, self.on_enable)
+        interface.create_subscription(api.FLOAT32, api.Topics.ADJUST, self.on_adjust)
+        poses = self.config.adjust_poses or (tuple(robot.home),)
+        self.adjust_poses = [robot.check_configuration(p, "config.adjust_poses").copy() for p in poses]
+        self._adjust_next = 0
 
     # ------------------------------------------------------------------------------------------------ callbacks
     def _reject(self, reason: str, topic: str, detail: str) -> None:
@@ -189,10 +206,31 @@ class SimulatedRobot:
         if not np.all(np.isfinite(q)):
             self._reject("not_finite", topic, f"non-finite positions {q.tolist()}")
             return
-        if self.fsm == FsmState.PAUSE:
-            self.rejected["paused"] = self.rejected.get("paused", 0) + 1
+        if self.fsm in (FsmState.PAUSE, FsmState.ADJUST):  # the adjust routine owns the arms
+            key = "paused" if self.fsm == FsmState.PAUSE else "adjusting"
+            self.rejected[key] = self.rejected.get(key, 0) + 1
             return
         index = self.indices[side]
+        over = np.maximum(q - self.upper[index], self.lower[index] - q)
+        if np.any(over > 1e-9):
+            j = int(np.argmax(over))
+            self.rejected["out_of_range"] = self.rejected.get("out_of_range", 0) + 1
+            now = self.interface.now()
+            if now - self._out_of_range_logged >= 1.0:  # a stream of them: one line a second, the count says how many
+                self._out_of_range_logged = now
+                action = "refused" if self.config.refuse_out_of_range else "clipped"
+                logger.warning(
+                    "%s %s: %s at %.6g rad, outside the hardware limits [%.6g, %.6g] (%d so far)",
+                    action,
+                    topic,
+                    api.ARM_JOINT_NAMES[side][j],
+                    q[j],
+                    self.lower[index][j],
+                    self.upper[index][j],
+                    self.rejected["out_of_range"],
+                )
+            if self.config.refuse_out_of_range:
+                return
         self.target[index] = np.clip(q, self.lower[index], self.upper[index])
         self.commanded[side] = True
         if self.config.motion == "interpolate":
@@ -203,15 +241,21 @@ class SimulatedRobot:
             self._last_command[side] = now
 
     def on_enable(self, fields: dict[str, Any]) -> None:
-        """``/api/fsm/enable``: heartbeat (> 0), pause (<= 0); non-finite values are ignored."""
+        """``/api/fsm/enable``: heartbeat (exactly 1.0), pause (<= 0); other values are rejected and counted."""
         value = float(fields.get("data", math.nan))
         now = self.interface.now()
         if not math.isfinite(value):
             self._reject("not_finite", api.Topics.ENABLE, f"enable {value}")
             return
+        if value > 0 and value != 1.0:
+            self._reject("enable_value", api.Topics.ENABLE, f"enable {value:g}: the heartbeat is exactly 1.0")
+            return
         if value <= 0:
             self.last_enable = None
             self._enter(FsmState.PAUSE, now, "disabled")
+            return
+        if self.fsm == FsmState.ADJUST:  # the guide: enable after the routine has finished (it pauses on its own)
+            self._reject("adjusting", api.Topics.ENABLE, "enable during the adjust routine")
             return
         self.last_enable = now
         if self.fsm == FsmState.PAUSE:
@@ -220,6 +264,23 @@ class SimulatedRobot:
             self.commanded = dict.fromkeys(api.SIDES, False)
             self.ready_count = 0
             self._enter(FsmState.SLOW_START, now, "enabled")
+
+    def on_adjust(self, fields: dict[str, Any]) -> None:
+        """``/api/fsm/adjust``: 1 starts the adjust routine (the arms visit ``adjust_poses`` at the slow-start speed,
+        then the FSM pauses on its own); -1 leaves it (PAUSE); other values are rejected."""
+        value = float(fields.get("data", math.nan))
+        now = self.interface.now()
+        if value == 1.0:
+            self._adjust_next = 0
+            self._segments.clear()
+            self.target = self.adjust_poses[0].copy()
+            self.last_enable = None
+            self._enter(FsmState.ADJUST, now, "adjust requested")
+        elif value == -1.0:
+            if self.fsm == FsmState.ADJUST:
+                self._enter(FsmState.PAUSE, now, "adjust cancelled")
+        else:
+            self._reject("adjust_value", api.Topics.ADJUST, f"adjust {value:g}: expected 1 (start) or -1 (stop)")
 
     def on_gripper(self, side: str, fields: dict[str, Any]) -> None:
         """``/api/{side}_gripper/cmd``: a trigger value in [0, 1]."""
@@ -298,6 +359,14 @@ class SimulatedRobot:
 
     def _check_fsm(self, now: float) -> None:
         if self.fsm == FsmState.PAUSE:
+            return
+        if self.fsm == FsmState.ADJUST:  # no heartbeat needed: the routine runs on its own, then pauses
+            if float(np.max(np.abs(self.q - self.target))) <= 1e-3:
+                self._adjust_next += 1
+                if self._adjust_next >= len(self.adjust_poses):
+                    self._enter(FsmState.PAUSE, now, "adjust complete")
+                else:
+                    self.target = self.adjust_poses[self._adjust_next].copy()
             return
         if self.last_enable is None or now - self.last_enable > self.config.heartbeat_timeout:
             self.last_enable = None
