@@ -12,6 +12,7 @@ import importlib
 import logging
 from typing import Any
 
+from taplan import clearance as _clearance  # noqa: F401 (registers check()'s collision half)
 from taplan.check import Report, Thresholds, check
 from taplan.errors import (
     ConfigError,

@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from taplan.check import register_collision_check
+
 __all__ = ["ClearanceCheck", "SELF_CLEARANCE", "check_clearance", "robot_world", "teleavatar_world"]
 
 SELF_CLEARANCE = 0.0  # [m] floor of robot-robot pairs: the capsules already enclose the URDF's collision geometry
@@ -168,3 +170,30 @@ def check_clearance(
         if not seg.valid:
             return result(False, lowest, pair, float(t[k]), evaluations)
     return result(True, lowest, pair, when, evaluations)
+
+
+def _for_check(
+    subject: Any,
+    names: tuple[str, ...],
+    q: np.ndarray,
+    t: np.ndarray,
+    clearance: Any,
+    hold: Any,
+    notes: list[str],
+) -> ClearanceCheck | None:
+    """The collision half of :func:`taplan.check.check` (``clearance="auto"``: the TeleAvatar's own bodies when
+    every joint is one of its joints; a Robot or a CollisionWorld as given)."""
+    from taplan.trajectory import Trajectory
+
+    if isinstance(clearance, str) and clearance == "auto":
+        world = teleavatar_world()
+        if not set(names) <= set(world.robot.joint_names):
+            notes.append("collision: not checked (the joints are not the TeleAvatar's; pass clearance=robot)")
+            return None
+        clearance = world
+    if isinstance(subject, Trajectory):
+        return check_clearance(subject, clearance, hold=hold)
+    return check_clearance(q, clearance, joint_names=names, times=t, hold=hold)
+
+
+register_collision_check(_for_check)

@@ -30,7 +30,7 @@ LAYERS = (
     ("robot",),
     ("scene",),
     ("ik", "timing", "reference", "check", "plots"),
-    ("planning", "stream", "api"),
+    ("planning", "stream", "api", "clearance"),
     ("ros", "viz", "demo", "commands", "cli", "__main__"),
 )
 ROOT = Path(taplan.__file__).parent
