@@ -499,3 +499,18 @@ def test_sim_adjust_mode_as_the_guide_describes(robot, start_sim) -> None:
     sim.process.terminate()
     sim.process.wait(timeout=20)
     assert "adjust complete" in sim.output()
+
+
+def test_plan_without_a_scene_checks_the_robots_own_bodies(robot, tmp_path: Path) -> None:
+    goal = robot.home.copy()
+    goal[7:] = INTO_TORSO
+    waypoints = tmp_path / "into_torso.csv"
+    np.savetxt(waypoints, np.vstack([robot.home, goal]), delimiter=",", header=",".join(robot.joint_names), comments="")
+    out = tmp_path / "plan.json"
+    done = subprocess.run(
+        [sys.executable, "-m", "taplan", "plan", str(waypoints), "-o", str(out)], capture_output=True, text=True
+    )
+    assert done.returncode == 1, done.stdout + done.stderr  # was: exit 0, the plan "passed"
+    assert "robot bodies (base_link_0" in done.stdout and "FAIL: base_link_0 / Link-R7_0 in collision" in done.stdout
+    checked = subprocess.run([sys.executable, "-m", "taplan", "check", str(out), "--no-png"], capture_output=True)
+    assert checked.returncode == 1
