@@ -301,3 +301,21 @@ def test_mesh_obstacle_matches_the_same_box(robot) -> None:
         apart = b.distance > 1e-4
         np.testing.assert_allclose(a.distance[apart], b.distance[apart], atol=1e-6)  # [m]
     assert meshes.min_distance(robot.home)[1] == boxes.min_distance(robot.home)[1]
+
+
+def test_scene_files_point_at_a_schema_that_exists() -> None:
+    """Each bundled scene names the document of its schema; that document exists and describes the file format."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    scenes = {
+        p.resolve() for base in (root / "models", root / "taplan" / "models") for p in base.rglob("scenes/*.yaml")
+    }
+    assert scenes
+    for path in scenes:
+        found = re.search(r"Schema: (\S+)", path.read_text())
+        assert found, f"{path.name} names no schema document"
+        doc = root / found.group(1)
+        assert doc.is_file(), f"{path.name} points at {found.group(1)}, which does not exist"
+        assert "frame: shoulder_base" in doc.read_text() and "obstacles:" in doc.read_text()
