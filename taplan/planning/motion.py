@@ -168,7 +168,8 @@ def _find_path(
                 return stage, [q0, q1], certificate, margin
         elif stage == "optimization":
             cap, perturbed = deadline, PERTURBED_SEEDS
-            if "rrt-connect" in stages[index + 1 :]:
+            compiled = not any(hasattr(o.shape, "capsule_distances") for o in world.scene.obstacles.values())
+            if "rrt-connect" in stages[index + 1 :] and compiled:  # perceived occupancy: the sampler is slow
                 # the sampler's path through the passage (smoothed later) is a better second seed than a random
                 # midpoint: the straight line only, for a share of the time
                 cap, perturbed = clock + OPTIMIZE_SHARE * max(deadline - clock, 0.0), 0
