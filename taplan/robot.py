@@ -106,6 +106,8 @@ class Robot:
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
         self._joint_index = {name: i for i, name in enumerate(self.joint_names)}
         self.frame_names: tuple[str, ...] = tuple(f.name for f in self.model.frames)
+        # frame 0 is pinocchio's "universe"; frame 1 the URDF's root link, the frame every T_root_* is in
+        self.root_frame: str = self.frame_names[1] if len(self.frame_names) > 1 else self.frame_names[0]
         self.capsules, self.skipped_collision = _load_capsules(self.model, self.urdf_path)
 
         if limits is None:

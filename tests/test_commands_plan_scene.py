@@ -51,3 +51,14 @@ def test_plan_with_a_waypoint_in_the_table_names_the_pair(tmp_path: Path, capsys
     assert main(["plan", str(path), "--scene", str(SCENE)]) == 2
     err = capsys.readouterr().err
     assert "goal" in err and pair[1] in err and "mm" in err
+
+
+def test_plan_refuses_a_scene_in_an_unknown_frame(tmp_path: Path, capsys) -> None:
+    robot = taplan.Robot.teleavatar()
+    scene = tmp_path / "world.yaml"
+    scene.write_text(SCENE.read_text().replace("frame: shoulder_base", "frame: world"))
+    path = _waypoints(tmp_path, [robot.home[:7], robot.home[:7] + 0.1])
+    assert main(["plan", str(path), "--scene", str(scene)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("taplan plan: error: ") and "'world'" in err and "base_link" in err
+    assert not (tmp_path / "waypoints_planned.json").exists()

@@ -319,3 +319,130 @@ def test_scene_files_point_at_a_schema_that_exists() -> None:
         doc = root / found.group(1)
         assert doc.is_file(), f"{path.name} points at {found.group(1)}, which does not exist"
         assert "frame: shoulder_base" in doc.read_text() and "obstacles:" in doc.read_text()
+
+
+POSE_TOL = 1e-9  # [m] and rotation-matrix entries: a transform composed from FK
+
+
+def _table_in(frame: str | None, **extra) -> dict:
+    data = {
+        "obstacles": [
+            {
+                "name": "box",
+                "shape": {"type": "box", "size": [0.12, 0.2, 0.16]},
+                "pose": {"xyz": [0.5, 0.1, -0.32], "xyzw": [0.0, 0.0, 0.38268343, 0.92387953]},
+            }
+        ]
+    }
+    if frame is not None:
+        data["frame"] = frame
+    data.update(extra)
+    return data
+
+
+@pytest.mark.parametrize("frame", ["shoulder_base", "base_link", "left_shoulder_base", "Link-R4", "left_ee"])
+def test_scene_file_frame_is_honoured(robot, frame) -> None:
+    """Obstacles given in any frame land at T_root_frame(home) @ T_frame_obstacle, the frame's FK pose."""
+    from taplan.scene import as_pose
+
+    scene = scene_from_dict(_table_in(frame), robot=robot)
+    T_frame_box = as_pose(([0.5, 0.1, -0.32], [0.0, 0.0, 0.38268343, 0.92387953]))
+    expected = robot.frame_pose(robot.home, frame) @ T_frame_box
+    np.testing.assert_allclose(scene.obstacles["box"].pose, expected, atol=POSE_TOL)
+    if frame == "base_link":  # rotated 90 deg about z from the root: x forward in the file is y (left) at the root
+        np.testing.assert_allclose(scene.obstacles["box"].pose[:3, 3], [-0.1, 0.5, -0.32], atol=POSE_TOL)
+
+
+def test_scene_file_frame_at_a_stated_configuration(robot) -> None:
+    """A moving frame is placed at the stated configuration: the file's entries over the argument's over home."""
+    q = robot.home.copy()
+    q[robot.joint_names.index("l_joint1")] += 0.4
+    q[robot.joint_names.index("l_joint4")] += 0.3
+    data = _table_in("left_ee", configuration={"l_joint4": float(q[robot.joint_names.index("l_joint4")])})
+    q_arg = robot.home.copy()
+    q_arg[robot.joint_names.index("l_joint1")] = q[robot.joint_names.index("l_joint1")]
+    scene = scene_from_dict(data, robot=robot, q=q_arg)
+    from taplan.scene import as_pose
+
+    T_frame_box = as_pose(([0.5, 0.1, -0.32], [0.0, 0.0, 0.38268343, 0.92387953]))
+    np.testing.assert_allclose(scene.obstacles["box"].pose, robot.frame_pose(q, "left_ee") @ T_frame_box, atol=POSE_TOL)
+
+
+def test_scene_file_without_frame_is_in_the_root_frame(robot) -> None:
+    scene = scene_from_dict(_table_in(None), robot=robot)
+    np.testing.assert_allclose(scene.obstacles["box"].pose[:3, 3], [0.5, 0.1, -0.32], atol=POSE_TOL)
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        (_table_in("world"), r"unknown frame .*'world'; valid: shoulder_base, .*left_ee"),
+        (_table_in("left_ee", configuration={"l_jointX": 0.1}), r"unknown joint .*'l_jointX'"),
+        (_table_in("left_ee", configuration={"l_joint4": 9.0}), r"configuration.*within the joint limits"),
+        (_table_in(None, configuration={"l_joint4": 1.0}), r"configuration.*a frame: to place"),
+        (
+            {
+                "attached": [
+                    {
+                        "name": "cup",
+                        "shape": {"type": "sphere", "radius": 0.04},
+                        "frame": "left_tcp",
+                        "pose": {"xyz": [0, 0, 0.08]},
+                        "touch": ["Link-NOPE"],
+                    }
+                ]
+            },
+            r"unknown touch body .*'Link-NOPE'; valid: .*Link-L7_0",
+        ),
+        (
+            {
+                "attached": [
+                    {
+                        "name": "cup",
+                        "shape": {"type": "sphere", "radius": 0.04},
+                        "frame": "hand",
+                        "pose": {"xyz": [0, 0, 0]},
+                    }
+                ]
+            },
+            r"unknown frame of attached object 'cup': 'hand'",
+        ),
+    ],
+)
+def test_scene_file_unknown_names_are_refused(robot, data, match) -> None:
+    with pytest.raises(taplan.TaplanError, match=match):
+        scene_from_dict(data, robot=robot)
+
+
+def test_save_scene_writes_the_root_frame_and_creates_directories(robot, tmp_path: Path) -> None:
+    scene = scene_from_dict(_table_in("base_link"), robot=robot)
+    path = save_scene(scene, tmp_path / "new" / "dir" / "scene.yaml")
+    import yaml
+
+    data = yaml.safe_load(path.read_text())
+    assert data["frame"] == robot.root_frame == "shoulder_base"
+    again = load_scene(path, robot)
+    np.testing.assert_allclose(again.obstacles["box"].pose, scene.obstacles["box"].pose, atol=POSE_TOL)
+    with pytest.raises(InvalidInputError, match="ending in"):
+        save_scene(scene, tmp_path / "scene.txt")
+
+
+def test_attach_checks_frame_and_touch_once_bound(robot) -> None:
+    scene = Scene(robot)
+    with pytest.raises(UnknownNameError, match="'nope'"):
+        scene.attach("cup", Sphere(0.04), "nope")
+    with pytest.raises(UnknownNameError, match="'Link-NOPE'"):
+        scene.attach("cup", Sphere(0.04), "left_tcp", touch=("Link-NOPE",))
+    assert scene.attach("cup", Sphere(0.04), "left_tcp", touch=("Link-L7_0",)).frame == "left_tcp"
+    loose = Scene()  # no robot yet: checked when a world binds it
+    loose.attach("cup", Sphere(0.04), "nope")
+    with pytest.raises(UnknownNameError, match="'nope'"):
+        CollisionWorld(robot, loose)
+    bound = CollisionWorld(robot, Scene()).scene  # a world binds its scene: later attachments checked at once
+    with pytest.raises(UnknownNameError, match="'nope'"):
+        bound.attach("cup", Sphere(0.04), "nope")
+
+
+def test_collision_world_refuses_a_file_name(robot) -> None:
+    with pytest.raises(InvalidInputError, match="taplan.scene.Scene or None.*load_scene"):
+        CollisionWorld(robot, str(MODELS / "table.yaml"))

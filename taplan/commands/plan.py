@@ -129,7 +129,7 @@ def _plan_in_scene(
     from taplan.planning import plan_motion
     from taplan.scene import CollisionWorld, Scene, load_scene
 
-    scene = load_scene(args.scene) if args.scene is not None else Scene()
+    scene = load_scene(args.scene, robot) if args.scene is not None else Scene()
     if args.scene_from_bag is not None:
         from taplan.ros.bag_perception import perceive_bag
 

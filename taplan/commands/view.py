@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scene is not None:
         from taplan.scene import load_scene
 
-        scene = load_scene(args.scene)
+        scene = load_scene(args.scene, robot)
     if args.html is not None:
         from taplan.viz import write_html
 

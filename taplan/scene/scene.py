@@ -3,18 +3,25 @@
 A :class:`Scene` is plain data that changes at run time (``add``, ``move``, ``remove``, ``attach``, ``detach``); its
 ``version`` increases with every change, so evaluators (:class:`~taplan.scene.CollisionWorld`) refresh their
 caches only when needed.
+
+A scene may be bound to its robot (``Scene(robot)``, :func:`~taplan.scene.load_scene` and
+:class:`~taplan.scene.CollisionWorld` bind it): from then on an attached object's frame and ``touch`` bodies are
+checked when it is attached, not first when a world evaluates it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from taplan.errors import InvalidInputError, UnknownNameError
 from taplan.scene.shapes import Shape
+
+if TYPE_CHECKING:
+    from taplan.robot import Robot
 
 __all__ = ["Obstacle", "AttachedObject", "Scene", "as_pose"]
 
@@ -75,12 +82,39 @@ class AttachedObject:
 
 
 class Scene:
-    """Obstacles and attached objects, by name."""
+    """Obstacles and attached objects, by name.
 
-    def __init__(self) -> None:
+    Args:
+        robot: The robot the scene is for; when given, attached objects' frames and ``touch`` bodies are checked
+            against it as they are attached (see :meth:`bind`).
+    """
+
+    def __init__(self, robot: Robot | None = None) -> None:
         self.obstacles: dict[str, Obstacle] = {}
         self.attached: dict[str, AttachedObject] = {}
         self.version = 0
+        self.robot: Robot | None = None
+        self._body_names: tuple[str, ...] = ()
+        if robot is not None:
+            self.bind(robot)
+
+    def bind(self, robot: Robot) -> None:
+        """Check every attached object against ``robot`` and check later ones as they are attached.
+
+        Raises:
+            UnknownNameError: an attached object's frame or ``touch`` body is not the robot's (names the valid ones).
+            InvalidInputError: the scene is already bound to another robot model.
+        """
+        if self.robot is robot:
+            return
+        if self.robot is not None and self.robot.urdf_path != robot.urdf_path:
+            raise InvalidInputError("robot", str(robot.urdf_path), f"the scene's robot {str(self.robot.urdf_path)!r}")
+        from taplan.scene.robot_bodies import robot_bodies
+
+        body_names = tuple(b.name for b in robot_bodies(robot))
+        for item in self.attached.values():
+            _check_attachment(item.name, item.frame, item.touch, robot, body_names)
+        self.robot, self._body_names = robot, body_names
 
     def __len__(self) -> int:
         return len(self.obstacles) + len(self.attached)
@@ -143,7 +177,13 @@ class Scene:
         """Carry ``shape`` with robot ``frame`` at ``pose`` (``T_frame_object``); ``touch``: bodies it may touch."""
         if not isinstance(shape, Shape):
             raise InvalidInputError("shape", shape, "a taplan.scene shape (Box, Sphere, ...)")
-        item = AttachedObject(self._check_name(name), shape, str(frame), as_pose(pose, f"{name}.pose"), tuple(touch))
+        if not isinstance(frame, str) or not frame:
+            raise InvalidInputError("frame", frame, "a frame name of the robot")
+        if isinstance(touch, str) or not all(isinstance(t, str) for t in touch):
+            raise InvalidInputError("touch", touch, "a sequence of robot body names")
+        if self.robot is not None:
+            _check_attachment(name, frame, tuple(touch), self.robot, self._body_names)
+        item = AttachedObject(self._check_name(name), shape, frame, as_pose(pose, f"{name}.pose"), tuple(touch))
         self.attached[name] = item
         self.version += 1
         return item
@@ -152,6 +192,8 @@ class Scene:
         """Attach obstacle ``name`` to ``frame`` where it is now (the hand frame's pose ``T_root_frame`` given)."""
         if name not in self.obstacles:
             raise UnknownNameError("obstacle", name, list(self.obstacles))
+        if self.robot is not None:
+            _check_attachment(name, frame, tuple(touch), self.robot, self._body_names)
         obstacle = self.obstacles.pop(name)
         T_frame_object = np.linalg.inv(as_pose(T_root_frame, "T_root_frame")) @ obstacle.pose
         self.attached[name] = AttachedObject(name, obstacle.shape, frame, T_frame_object, tuple(touch))
@@ -166,3 +208,19 @@ class Scene:
         self.obstacles[name] = obstacle
         self.version += 1
         return obstacle
+
+
+def link_frames(robot: Robot) -> list[str]:
+    """The robot's link frames: the names worth listing when a frame is unknown (joint frames are valid too)."""
+    import pinocchio as pin
+
+    return [f.name for f in robot.model.frames if f.type == pin.FrameType.BODY]
+
+
+def _check_attachment(name: str, frame: str, touch: tuple[str, ...], robot: Robot, bodies: tuple[str, ...]) -> None:
+    if frame not in robot.frame_names:
+        frames = link_frames(robot)
+        raise UnknownNameError(f"frame of attached object {name!r}:", frame, frames)
+    for body in touch:
+        if body not in bodies:
+            raise UnknownNameError(f"touch body of attached object {name!r}:", body, bodies)

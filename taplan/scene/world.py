@@ -151,8 +151,12 @@ class CollisionWorld:
         self._coal = coal
         if not (isinstance(margin, (int, float)) and math.isfinite(margin) and margin >= 0):
             raise InvalidInputError("margin", margin, "a clearance >= 0 [m]")
+        if scene is not None and not isinstance(scene, Scene):
+            hint = " (load a file with taplan.scene.load_scene)" if isinstance(scene, (str, bytes)) else ""
+            raise InvalidInputError("scene", scene, f"a taplan.scene.Scene or None{hint}")
         self.robot = robot
         self.scene = scene if scene is not None else Scene()
+        self.scene.bind(robot)  # attached frames and touch bodies checked now and whenever one is attached
         self.margin = float(margin)
         self.model = robot.model
         self.data = robot.model.createData()
