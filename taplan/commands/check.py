@@ -7,18 +7,26 @@ joint-position|joint-velocity`` checks what that controller would do with it ins
 still hold the position, velocity and acceleration limits: a sampled stream can hide an excess between its
 samples). Joints are matched by name to the robot (default the bundled TeleAvatar); ``--limits planning`` uses the
 planner's scaled limits instead of the hardware ceilings. Prints the report, writes a PNG of q, q̇, q̈ and jerk, and
-optionally the report as JSON.
+optionally the report as JSON. ``--scene scene.yaml`` also checks the plan's clearance to the scene (and
+the robot's own bodies) along the whole timed trajectory (:func:`taplan.planning.scene_clearance`): the closest pair
+and when, FAIL when anything is closer than ``--margin`` (default 0: contact) at any instant. No PNG for a bag.
 """
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from taplan.check import Thresholds, check
 from taplan.commands.replay import add_controller_arguments, replay_with, validate_controller_arguments
 from taplan.errors import ConfigError, InvalidInputError
 from taplan.io import bounded_rate, load_trajectory, output_path
+
+if TYPE_CHECKING:
+    from taplan.planning.clearance import SceneClearance
+    from taplan.robot import Robot
+    from taplan.trajectory import Trajectory
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,14 +43,46 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--rate", type=float, default=None, help="evaluation rate of a trajectory [Hz] (1000)")
     parser.add_argument("--no-jerk", action="store_true", help="report jerk without failing on it")
-    parser.add_argument("--png", type=Path, default=None, help="plot file (default <file>_check.png)")
+    parser.add_argument("--png", type=Path, default=None, help="plot file of a plan (default <file>_check.png)")
     parser.add_argument("--no-png", action="store_true", help="do not write a plot")
     parser.add_argument("--json", type=Path, default=None, help="also write the report as JSON")
+    parser.add_argument(
+        "--scene", type=Path, default=None, help="also check the plan's clearance to this scene (.yaml/.json)"
+    )
+    parser.add_argument(
+        "--margin",
+        type=float,
+        default=None,
+        help="with --scene: clearance [m] required at every instant (default 0: no contact)",
+    )
 
 
 def _validate(args: argparse.Namespace) -> None:
     """Every option checked before any work, so no error can follow a printed verdict."""
     validate_controller_arguments(args)
+    bag = args.file.suffix.lower() == ".mcap" or _is_bag_directory(args.file)
+    if args.controller == "trajectory":
+        for option, default in (("update_rate", 100.0), ("pub_rate", 10.0), ("command_rate", 100.0)):
+            if getattr(args, option) != default:
+                flag = "--" + option.replace("_", "-")
+                raise InvalidInputError(flag, getattr(args, option), "no controller rate without a --controller")
+    elif bag:
+        raise InvalidInputError(
+            "--controller", args.controller, "no --controller with a bag (a recorded run is checked as it ran)"
+        )
+    if bag and args.png is not None:
+        raise InvalidInputError("--png", str(args.png), "no --png with a bag (a plot is drawn for a plan file)")
+    if args.margin is not None:
+        if args.scene is None:
+            raise InvalidInputError("--margin", args.margin, "no --margin without --scene (it is the scene clearance)")
+        if not (args.margin >= 0 and args.margin < float("inf")):
+            raise InvalidInputError("--margin", args.margin, "a clearance >= 0 [m]")
+    args.margin = 0.0 if args.margin is None else args.margin
+    if args.scene is not None:
+        if bag:
+            raise InvalidInputError("--scene", str(args.scene), "a plan file to check against a scene, not a bag")
+        if not args.scene.is_file():
+            raise ConfigError(f"--scene: file not found: {str(args.scene)!r}")
     if args.rate is not None:
         if args.controller != "trajectory" or args.file.suffix.lower() == ".mcap" or _is_bag_directory(args.file):
             raise InvalidInputError("--rate", args.rate, "no --rate with a --controller or a bag (they set the rate)")
@@ -91,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
     print(report.table())
     if plan_failures:
         print(f"the plan itself: FAIL: {'; '.join(plan_failures)}")
+    clearance = None
+    if args.scene is not None:
+        clearance = check_scene(trajectory, robot, args.scene, args.margin)
+        print(clearance.summary())
     if not args.no_png:
         from taplan.plots import save_profiles
 
@@ -99,9 +143,25 @@ def run(args: argparse.Namespace) -> int:
         save_profiles(subject, png, limits, title=f"{args.file.name}: {how} ({args.limits} limits)")
         print(f"wrote {png}")
     if args.json is not None:
-        args.json.write_text(report.to_json())
+        if clearance is None:
+            args.json.write_text(report.to_json())
+        else:
+            import json
+
+            data = {**report.to_dict(), "scene": {"file": str(args.scene), **clearance.to_dict()}}
+            args.json.write_text(json.dumps(data, indent=2, default=float))
         print(f"wrote {args.json}")
-    return 0 if report.passed and not plan_failures else 1
+    return 0 if report.passed and not plan_failures and (clearance is None or clearance.passed) else 1
+
+
+def check_scene(trajectory: Trajectory, robot: Robot, scene: Path, margin: float = 0.0) -> SceneClearance:
+    """The plan's clearance to ``scene`` (and the robot's own bodies) along the whole timed trajectory; the joints
+    the plan does not drive hold the home pose (where ``taplan sim`` starts; ``taplan run --scene`` holds them where
+    the robot is)."""
+    from taplan.planning.clearance import scene_clearance
+    from taplan.scene import CollisionWorld, load_scene
+
+    return scene_clearance(CollisionWorld(robot, load_scene(scene, robot)), trajectory, margin)
 
 
 def _check_bag(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ Layer order: robot -> scene -> ik / timing / stream -> planning -> trajectory ->
 from __future__ import annotations
 
 from taplan.planning.cartesian import CartesianResult, cartesian_line, cartesian_offset
+from taplan.planning.clearance import SceneClearance, scene_clearance
 from taplan.planning.motion import MotionPlan, PlanReport, plan_motion
 from taplan.planning.optimize import OptimizedPath, optimize_path
 from taplan.planning.replan import ReplanEvent, Replanner
@@ -24,6 +25,8 @@ __all__ = [
     "check_segments",
     "Replanner",
     "ReplanEvent",
+    "scene_clearance",
+    "SceneClearance",
     "verify_trajectory",
     "SegmentCheck",
     "Verification",
