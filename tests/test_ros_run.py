@@ -302,3 +302,36 @@ def test_cli_run_executes_a_plan_file_and_records_a_bag(robot, start_sim, tmp_pa
     assert check_run(run, robot.limits).passed
     period = np.median(np.diff(run.commanded["left"].times))
     assert abs(period - 1 / 50) < 2e-3  # commands at the chosen 50 Hz [s]
+
+
+def _cli_run(sim: Sim, stdin: str, *extra: str) -> subprocess.CompletedProcess:
+    command = [sys.executable, "-m", "taplan", "run", "--targets", "-", "--loopback", "--domain-id", str(sim.domain)]
+    return subprocess.run([*command, *extra], input=stdin, capture_output=True, text=True, timeout=120)
+
+
+def test_cli_streams_pose_targets_from_stdin_like_a_file(robot, start_sim, tmp_path: Path) -> None:
+    """docs/ros.md's stdin pose stream moves the arm; a bad first line is skipped like any other; a run whose
+    targets were all rejected does not end "completed"; a clamped target is reported."""
+    import json
+
+    sim = start_sim(duration=120.0)
+    T = robot.frame_pose(robot.home, "left_ee")
+    T[:3, 3] += [0.0, 0.0, -0.03]  # 3 cm down [m]
+    import pinocchio as pin
+
+    pose = [*T[:3, 3], *pin.Quaternion(T[:3, :3]).coeffs()]  # xyz, xyzw
+    record = tmp_path / "pose.npz"
+    stdin = "not json\n" + json.dumps({"left_ee": pose}) + "\n"
+    done = _cli_run(sim, stdin, "--duration", "2.5", "--record", str(record))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "1 pose target streamed, 1 rejected" in done.stdout and "completed" in done.stdout
+    reached = robot.frame_pose(np.load(record)["measured"][-1], "left_ee")
+    assert np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 2e-3  # [m]: the arm went there
+
+    done = _cli_run(sim, 'not json\n{"q": [1.0]}\n', "--duration", "0.5")
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "no targets: all 2 targets were rejected: the arm only held its position" in done.stdout
+
+    done = _cli_run(sim, '{"l_joint1": 9.0}\n', "--duration", "0.5")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "1 joint target streamed, 1 clamped into the joint limits" in done.stdout

@@ -130,24 +130,23 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _stream_targets(runner, robot, args: argparse.Namespace):  # noqa: ANN001, ANN202 (CLI glue)
+    import dataclasses
     import sys
 
-    from taplan.ros.targets import TargetFeed, parse_target
-    from taplan.stream import PoseStreamer
+    from taplan.ros.targets import TargetFeed, TargetStreamer
 
     lines = sys.stdin if args.targets == "-" else open(args.targets)  # noqa: SIM115 (read by the feed thread)
     start = runner.wait_for_state()
     feed = TargetFeed(lines, robot, start)
-    streamer = None
-    if args.targets != "-":  # a file: look at its first target to pick the streamer
-        with open(args.targets) as probe:
-            first = next((line for line in probe if line.strip()), None)
-        if first is not None and parse_target(first, robot, start)[1] == "pose":
-            streamer = PoseStreamer(robot, runner.period, timeout=None, scene=runner.world)  # IK avoids the torso too
+    # joint or pose: its first accepted target decides; the pose streamer's IK avoids the torso (and the scene)
+    streamer = TargetStreamer(robot, runner.limits, runner.period, scene=runner.world)
     print(f"taplan run: streaming targets from {args.targets} for {args.duration:g} s at {args.rate:g} Hz", flush=True)
     result = runner.stream(feed, args.duration, streamer=streamer)
-    if feed.skipped:
-        print(f"taplan run: skipped {feed.skipped} target line(s)", flush=True)
+    print(f"taplan run: {streamer.summary(feed.skipped)}", flush=True)
+    if result.status == "completed" and streamer.accepted == 0:
+        rejected = feed.skipped + streamer.rejected
+        reason = f"all {rejected} targets were rejected" if rejected else "no target arrived"
+        result = dataclasses.replace(result, status="no targets", reason=f"{reason}: the arm only held its position")
     return result
 
 

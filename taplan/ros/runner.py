@@ -611,6 +611,7 @@ class Runner:
         settle_until: float | None = None
         last_progress = t0
         status, reason = "completed", "plan finished"
+        last_stamp: float | None = None  # receive time of the last joint state logged
         try:
             while True:
                 now = self.clock()
@@ -624,8 +625,10 @@ class Runner:
                 measured = self.measured()
                 if measured is not None:
                     age, q_meas = measured
-                    if not log.measured_times or log.measured_times[-1] != self._latest_time():
-                        log.measured_times.append(self._latest_time() - t0)
+                    fresh = self._latest_time() != last_stamp
+                    if fresh:
+                        last_stamp = self._latest_time()
+                        log.measured_times.append(last_stamp - t0)
                         log.measured.append(q_meas)
                     stale = self.stale_after()
                     if age > stale:

@@ -8,7 +8,9 @@ of the stream (a file replays on that schedule; lines without ``"t"`` apply as s
 * ``{"t": 0.5, "left_ee": [x, y, z, qx, qy, qz, qw], "right_ee": [...]}``: poses in the root frame [m], quaternion
   ``xyzw``.
 
-A line that does not parse is logged and skipped: it never reaches the robot.
+A line that does not parse is logged and skipped: it never reaches the robot, wherever it is in the stream (the
+first line included). :class:`TargetStreamer` picks the joint or the pose streamer from the first target that
+arrives, so a file and standard input behave alike, and counts what it accepted, rejected and clamped.
 """
 
 from __future__ import annotations
@@ -17,15 +19,16 @@ import json
 import logging
 import queue
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any, TextIO
 
 import numpy as np
 
-from taplan.errors import InvalidInputError
+from taplan.errors import InvalidInputError, TaplanError
+from taplan.limits import JointLimits
 from taplan.robot import Robot
 
-__all__ = ["TargetFeed", "parse_target"]
+__all__ = ["TargetFeed", "TargetStreamer", "parse_target"]
 
 logger = logging.getLogger(__name__)
 
@@ -123,3 +126,79 @@ class TargetFeed:
                 continue
             due = target
         return due
+
+
+class TargetStreamer:
+    """A streamer for :meth:`taplan.ros.Runner.stream` that becomes a joint or a pose streamer with its first target.
+
+    Until a target arrives it holds the start (a :class:`~taplan.stream.JointStreamer` at rest); the first target
+    decides: joint positions keep the joint streamer, a ``{frame: pose}`` mapping switches to a
+    :class:`~taplan.stream.PoseStreamer` started from the held configuration. Later targets of the other kind are
+    rejected by the streamer in use (:class:`TargetFeed` already skips them).
+
+    Args:
+        robot: The model.
+        limits: Joint limits of the joint streamer (the runner's).
+        dt: Arm period [s].
+        **pose_options: Passed to the :class:`~taplan.stream.PoseStreamer` (``scene=``, ``frames=`` ...).
+
+    Attributes:
+        kind: ``None`` until the first target, then ``"joint"`` or ``"pose"``.
+        accepted: Targets the streamer took.
+        rejected: Targets it refused (NaN, wrong shape, a frame it does not stream).
+        clamped: Joint targets admitted after clamping into the joint limits.
+    """
+
+    def __init__(self, robot: Robot, limits: JointLimits, dt: float, **pose_options: Any) -> None:
+        from taplan.stream import JointStreamer, PoseStreamer
+
+        self.robot = robot
+        self.dt = dt
+        self._joint = JointStreamer(limits, dt, timeout=None)
+        # built now, not at the first pose target: building the IK inside the arm loop would stall the commands
+        self._pose = PoseStreamer(robot, dt, **{"timeout": None, **pose_options})
+        self._active: Any = self._joint
+        self._last: Any = None
+        self.kind: str | None = None
+        self.accepted = 0
+        self.rejected = 0
+        self.clamped = 0
+
+    def reset(self, position: np.ndarray) -> Any:
+        """Start holding ``position`` [rad] (clamped into the limits, as the runner does for its joint streamer)."""
+        self._last = self._joint.reset(position, clamp=True)
+        self._active, self.kind = self._joint, None
+        return self._last
+
+    def set_target(self, target: Any) -> None:
+        """Pass ``target`` on; the first one picks the streamer. Raises the streamer's error for a bad target."""
+        if self.kind is None:
+            if isinstance(target, Mapping):
+                self._pose.reset(self._last.position, self._last.velocity)
+                self._active, self.kind = self._pose, "pose"
+            else:
+                self.kind = "joint"
+        try:
+            adjusted = self._active.set_target(target)
+        except TaplanError:
+            self.rejected += 1
+            raise
+        self.accepted += 1
+        self.clamped += bool(adjusted)  # the joint streamer says when it clamped; the pose streamer's IK stays inside
+
+    def step(self) -> Any:
+        self._last = self._active.step()
+        return self._last
+
+    def summary(self, skipped: int = 0) -> str:
+        """What happened to the targets, e.g. ``"12 pose targets streamed, 1 line skipped"``."""
+        count = (
+            f"{self.accepted} {self.kind} target{'' if self.accepted == 1 else 's'}" if self.accepted else "no target"
+        )
+        parts = [f"{count} streamed"]
+        if self.clamped:
+            parts.append(f"{self.clamped} clamped into the joint limits")
+        bad = skipped + self.rejected
+        if bad:
+            parts.append(f"{bad} rejected (malformed or out of place; never sent)")
+        return ", ".join(parts)
