@@ -62,3 +62,24 @@ def test_plan_refuses_a_scene_in_an_unknown_frame(tmp_path: Path, capsys) -> Non
     err = capsys.readouterr().err
     assert err.startswith("taplan plan: error: ") and "'world'" in err and "base_link" in err
     assert not (tmp_path / "waypoints_planned.json").exists()
+
+
+def test_hardware_limits_never_plan_slower_than_the_planning_limits(tmp_path: Path, capsys) -> None:
+    """Issue 23: with the hardware limits the fastest timing cut the box and the retry crawled (20.2 s against
+    0.93 s); now the fallback is the fastest timing that verifies, and it is reported."""
+    robot = taplan.Robot.teleavatar()
+    rows = [robot.home[7:], np.array([-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403])]  # across the box
+    path = tmp_path / "waypoints.csv"
+    np.savetxt(path, np.array(rows), delimiter=",", header=",".join(robot.joint_names[7:]), comments="")
+    durations = {}
+    for limits in ("planning", "hardware"):
+        out = tmp_path / f"{limits}.json"
+        assert main(["plan", str(path), "--scene", str(SCENE), "--limits", limits, "-o", str(out)]) == 0
+        durations[limits] = taplan.Trajectory.load(out).duration
+        printed = capsys.readouterr().out
+        if limits == "hardware":
+            assert "note: timing fell back to" in printed and "mm into collision" in printed
+    assert durations["hardware"] <= durations["planning"]  # [s]
+    hardware = taplan.Trajectory.load(tmp_path / "hardware.json")
+    world = CollisionWorld(robot, load_scene(SCENE))
+    assert verify_trajectory(world, hardware, floor=0.0).collision_free

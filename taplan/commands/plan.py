@@ -157,6 +157,8 @@ def _plan_in_scene(
             f"{r.min_clearance * 1e3:.1f} mm ({r.min_clearance_pair[0]} / {r.min_clearance_pair[1]}), planned in "
             f"{sum(r.stage_times.values()):.2f} s"
         )
+        for note in r.notes:
+            print(f"  note: {note}")
         trajectory = plan.trajectory
         times += list(offset + trajectory.times[1:])
         pieces.append(trajectory.coefficients)
@@ -169,6 +171,8 @@ def _plan_in_scene(
     where = " + ".join(str(s) for s in (args.scene, args.scene_from_bag) if s is not None)
     report = check(trajectory, limits, name=f"{path.name} in {where}")
     print(report.table())
-    print(f"\n{len(waypoints)} waypoints, {len(waypoints) - 1} legs -> {trajectory.duration:.3f} s, collision-free")
+    legs = len(waypoints) - 1
+    plural = "" if legs == 1 else "s"
+    print(f"\n{len(waypoints)} waypoints, {legs} leg{plural} -> {trajectory.duration:.3f} s, collision-free")
     print(f"wrote {output} (exact) and {sampled} ({args.rate:g} Hz samples)")
     return 0 if report.passed else 1

@@ -23,8 +23,10 @@
    (:func:`~taplan.timing.straight.straight_line`, ruckig); a polyline :func:`~taplan.timing.jerk_limited`
    (densified so that its spline stays near the segments), interior corners cut by at most ``max_deviation``.
 5. **Verification**: the timed trajectory is certified at every instant (conservative advancement with the exact
-   peak joint speeds), never only at waypoints. If it comes closer than ``margin / 4``, the path is densified and
-   retimed (with exact waypoints at the last attempt); a plan that fails is never returned: PlanningError.
+   peak joint speeds), never only at waypoints. If the first (fastest) timing comes closer than ``margin / 4``, the
+   other timings (half the limits, corners cut less on a denser path, a quarter of the limits, exact waypoints) are
+   computed and verified shortest first, so the fallback is the fastest safe one, and ``report.timing_fallback``
+   says which and why; a plan that fails is never returned: PlanningError.
 
 ``max_time`` bounds the whole call: the goal IK stops seeding after half of it, the path search leaves
 ``FINISH_SHARE`` of it (0.05–2 s) for timing and verification, a sampled path is smoothed only when the time left
@@ -91,7 +93,9 @@ class PlanReport:
         margin: The clearance the path keeps at its configurations [m]: ``margin``, or less when only the sampler
             found a path, at a lower clearance, through a narrow passage (at least the floor; ``notes`` says so).
         notes: What the planner gave up: the smoothing of a sampled path to hold the time budget, the margin in a
-            narrow passage.
+            narrow passage, or (for safety) the fastest timing (see ``timing_fallback``).
+        timing_fallback: Empty when the fastest timing verified; else which slower timing was used and why (the
+            fastest cut a corner into the margin), e.g. ``"timing fell back to ... at 0.5 x the limits: 0.77 s"``.
         elapsed: Wall time of the whole call [s].
     """
 
@@ -110,6 +114,7 @@ class PlanReport:
     margin: float = DEFAULT_MARGIN
     notes: tuple[str, ...] = ()
     elapsed: float = 0.0
+    timing_fallback: str = ""
 
 
 @dataclass(frozen=True)
@@ -316,6 +321,42 @@ class _Timed:
     min_clearance: float
     pair: tuple[str, str]
     attempts: int
+    fallback: str = ""  # why and how a slower timing than the first was used ("" when the first verified)
+
+
+@dataclass(frozen=True)
+class _Timing:
+    """One way to time the path: ruckig on a straight segment (``step`` None), else the jerk-limited filter of the
+    path densified to ``step`` [rad] with corners cut by at most ``deviation`` [rad] (0: exact waypoints), under the
+    limits scaled by ``speed``."""
+
+    step: float | None
+    deviation: float
+    speed: float
+
+    def describe(self) -> str:
+        if self.step is None:
+            what = "the straight segment"
+        elif self.deviation > 0:
+            what = f"corners cut by <= {self.deviation * 1e3:.0f} mrad"
+        else:
+            what = "the exact waypoints"
+        return what + ("" if self.speed == 1.0 else f" at {self.speed:g} x the limits")
+
+
+def _timings(two_points: bool, max_deviation: float) -> list[_Timing]:
+    """The timings tried, the fastest expected first. A timing that cuts a corner into an obstacle is retried slower
+    (a moving average cuts a corner in proportion to the speed) before tighter (the filter's corner repair slows
+    the corners compoundingly and can crawl: 20 s instead of 0.8 s at the hardware limits)."""
+    out = [_Timing(None, 0.0, 1.0)] if two_points else []
+    out += [
+        _Timing(DENSIFY_STEP, max_deviation, 1.0),
+        _Timing(DENSIFY_STEP, max_deviation, 0.5),
+        _Timing(DENSIFY_STEP / 2, max_deviation / 5, 1.0),  # jerk_limited: exact waypoints when that is faster
+        _Timing(DENSIFY_STEP, max_deviation, 0.25),
+        _Timing(DENSIFY_STEP / 4, 0.0, 1.0),  # the last resort, timed only when every other one failed
+    ]
+    return out
 
 
 def _time_and_verify(
@@ -357,31 +398,43 @@ def _time_and_verify(
         if check.min_clearance < lowest:
             lowest, lowest_pair = check.min_clearance, check.pair
 
-    # a straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA,
-    # denser and finally through the exact waypoints when the verification asks for more accuracy
-    plans: list[tuple[float, float] | None] = [None] if len(path) == 2 else []
-    plans += [(DENSIFY_STEP, max_deviation), (DENSIFY_STEP / 2, max_deviation / 5), (DENSIFY_STEP / 4, 0.0)]
+    # A straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA. The
+    # first timing is the fastest: when it verifies it is the plan. Otherwise every other timing is computed (cheap
+    # next to a verification) and they are verified shortest first, so a slower fallback is the fastest that is safe.
+    def timed(how: _Timing) -> Trajectory:
+        scaled = sub.replace(
+            velocity=sub.velocity * how.speed, acceleration=sub.acceleration * how.speed, jerk=sub.jerk * how.speed
+        )
+        if how.step is None:
+            part = straight_line(path[0][active], path[1][active], scaled)
+        else:
+            dense = _densify(path, how.step)[:, active]
+            if how.deviation > 0:
+                part = jerk_limited(dense, scaled, method="joint", max_deviation=how.deviation).trajectory
+            else:
+                part = jerk_limited(dense, scaled, method="path").trajectory
+        return _full_trajectory(part, names, active, q0)
+
+    candidates: list[tuple[float, int, _Timing, Trajectory]] = []
     why = "no timing was tried"
-    for attempt, plan in enumerate(plans):
-        if attempt and time.perf_counter() >= deadline:
-            return f"the time budget ran out after {attempt} timings ({why})"
+    first: tuple[float, str] | None = None  # the fastest timing's duration and why it was not used
+    verified = 0
+    options = _timings(len(path) == 2, max_deviation)
+    for rank, how in enumerate(options[:-1]):
+        if rank and time.perf_counter() >= deadline:
+            break
         clock = time.perf_counter()
         try:
-            if plan is None:
-                part = straight_line(path[0][active], path[1][active], sub)
-            else:
-                step, deviation = plan
-                dense = _densify(path, step)[:, active]
-                if deviation > 0:
-                    part = jerk_limited(dense, sub, method="joint", max_deviation=deviation).trajectory
-                else:
-                    part = jerk_limited(dense, sub, method="path").trajectory
+            middle = timed(how)
         except TimingError as exc:
-            times["timing"] += time.perf_counter() - clock
             why = f"timing the path failed: {exc}"
-            continue  # a denser path stays closer to its segments
-        middle = _full_trajectory(part, names, active, q0)
-        times["timing"] += time.perf_counter() - clock
+            continue
+        finally:
+            times["timing"] += time.perf_counter() - clock
+        if rank:
+            candidates.append((middle.duration, rank, how, middle))
+            continue
+        verified += 1
         clock = time.perf_counter()
         if plan is None and certificate is not None and _on_certified_segment(world, middle, path, margin):
             check = Verification(True, certificate.clearance, certificate.pair, 0.0, 0)
@@ -389,17 +442,71 @@ def _time_and_verify(
             check = verify_trajectory(world, middle, floor=margin / 4, hold=q0, deadline=deadline)
         times["verify"] += time.perf_counter() - clock
         if check.timed_out:
-            return f"the time budget ran out while verifying timing {attempt + 1}"
+            return "the time budget ran out while verifying timing 1"
         if check.collision_free:
-            pieces = [p for p in (ends.get("start"), middle, ends.get("goal")) if p is not None]
-            if check.min_clearance < lowest:
-                lowest, lowest_pair = check.min_clearance, check.pair
-            return _Timed(_concatenate(pieces), float(lowest), lowest_pair, attempt + 1)
-        why = (
-            f"the timed trajectory comes within {check.min_clearance * 1e3:.1f} mm of collision "
-            f"({check.pair[0]} / {check.pair[1]} at t = {check.time:.3f} s) after {attempt + 1} timings: not returned"
-        )
-    return why
+            return _finish(ends, middle, check, lowest, lowest_pair, 1, "")
+        why = _too_close(check, margin / 4)
+        first = (middle.duration, why)
+    last = len(options) - 1
+
+    def last_resort() -> list[tuple[float, int, _Timing, Trajectory]]:
+        nonlocal why
+        if time.perf_counter() >= deadline:
+            return []
+        clock = time.perf_counter()
+        try:
+            middle = timed(options[last])
+        except TimingError as exc:
+            why = f"timing the path failed: {exc}"
+            return []
+        finally:
+            times["timing"] += time.perf_counter() - clock
+        return [(middle.duration, last, options[last], middle)]
+
+    queue = sorted(candidates, key=lambda c: (c[0], c[1])) or last_resort()
+    while queue:
+        duration, rank, how, middle = queue.pop(0)
+        if time.perf_counter() >= deadline:
+            return f"the time budget ran out after {verified} verified timings ({why})"
+        verified += 1
+        clock = time.perf_counter()
+        check = verify_trajectory(world, middle, floor=margin / 4, hold=q0, deadline=deadline)
+        times["verify"] += time.perf_counter() - clock
+        if check.timed_out:
+            return f"the time budget ran out while verifying timing {verified}"
+        if check.collision_free:
+            fallback = f"timing fell back to {how.describe()}: {duration:.3f} s"
+            if first is not None:
+                fallback += f" (the fastest timing, {first[0]:.3f} s, {first[1]})"
+            return _finish(ends, middle, check, lowest, lowest_pair, verified, fallback)
+        why = _too_close(check, margin / 4)
+        if not queue and rank < last:
+            queue = last_resort()
+    return f"{why} after {verified} verified timings: not returned"
+
+
+def _too_close(check: Any, floor: float) -> str:
+    """Why a timed trajectory was not certified, in words."""
+    d, (a, b), t = check.min_clearance, check.pair, check.time
+    where = f"({a} / {b} at t = {t:.3f} s)"
+    if d < 0:
+        return f"the timed trajectory goes {-d * 1e3:.1f} mm into collision {where}"
+    return f"the timed trajectory comes within {d * 1e3:.1f} mm of collision {where}, {floor * 1e3:.1f} mm required"
+
+
+def _finish(
+    ends: dict[str, Trajectory],
+    middle: Trajectory,
+    check: Any,
+    lowest: float,
+    lowest_pair: tuple[str, str],
+    attempts: int,
+    fallback: str,
+) -> _Timed:
+    pieces = [p for p in (ends.get("start"), middle, ends.get("goal")) if p is not None]
+    if check.min_clearance < lowest:
+        lowest, lowest_pair = check.min_clearance, check.pair
+    return _Timed(_concatenate(pieces), float(lowest), lowest_pair, attempts, fallback)
 
 
 def _on_certified_segment(world: CollisionWorld, trajectory: Trajectory, path: list[np.ndarray], margin: float) -> bool:
@@ -619,7 +726,8 @@ def plan_motion(
         margin=kept,
         goal=q1,
         approaches=tuple(approaches),
-        notes=tuple(notes),
+        notes=tuple(notes) + ((timed.fallback,) if timed.fallback else ()),
+        timing_fallback=timed.fallback,
         elapsed=time.perf_counter() - begin,
     )
     full_path = (
