@@ -35,11 +35,15 @@ from taplan.trajectory import Trajectory
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="waypoint or trajectory file (.csv, .json, .npz)")
-    parser.add_argument("--method", choices=("topp", "jerk"), default="jerk", help="timing method (default jerk)")
+    parser.add_argument(
+        "--method", choices=("topp", "jerk"), default=None, help="timing method without --scene (default jerk)"
+    )
     parser.add_argument(
         "--limits", choices=("planning", "hardware"), default="planning", help="limits to plan with (default planning)"
     )
-    parser.add_argument("-o", "--output", help="output trajectory file (default FILE stem + _timed.json)")
+    parser.add_argument(
+        "-o", "--output", help="output trajectory file (default FILE stem + _timed.json; with --scene _planned.json)"
+    )
     parser.add_argument("--rate", type=float, default=100.0, help="also write a CSV sampled at this rate [Hz]")
     parser.add_argument("--scene", default=None, help="plan collision-free legs around this scene (.yaml/.json)")
     parser.add_argument(
@@ -47,17 +51,56 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="plan around what the wrist depth cameras saw in this rosbag2 .mcap (with --scene: both)",
     )
-    parser.add_argument("--margin", type=float, default=0.01, help="clearance of the planned path [m] (0.01)")
+    parser.add_argument(
+        "--margin", type=float, default=None, help="with --scene: clearance of the planned path [m] (0.01)"
+    )
     parser.add_argument(
         "--recorded", action="store_true", help="FILE is a recorded demonstration (time column; implied for .mcap)"
     )
     parser.add_argument(
-        "--max-deviation", type=float, default=0.01, help="recorded: largest deviation from the recording [rad] (0.01)"
+        "--max-deviation", type=float, default=None, help="recorded: largest deviation from the recording [rad] (0.01)"
     )
     parser.add_argument("--fastest", action="store_true", help="recorded: as fast as the limits allow, not as recorded")
     parser.add_argument(
-        "--stream", choices=("measured", "commanded"), default="measured", help="recorded bag: which joint stream"
+        "--stream",
+        choices=("measured", "commanded"),
+        default=None,
+        help="recorded bag: which joint stream (default measured)",
     )
+
+
+def _validate(args: argparse.Namespace, path: Path) -> None:
+    """Every option checked before any work: an option the chosen mode would not use is refused, never ignored."""
+    args.rate = bounded_rate(args.rate, "--rate")
+    recorded = args.recorded or path.suffix.lower() == ".mcap"
+    scene = args.scene is not None or args.scene_from_bag is not None
+    mode = "a recorded demonstration" if recorded else ("--scene" if scene else "waypoints")
+    if scene and recorded:
+        raise InvalidInputError("--scene", args.scene, "waypoints, not a recorded demonstration (it is not planned)")
+    if args.method is not None and (scene or recorded):
+        timing = "--scene plans are jerk-limited" if scene else "a recording is timed as recorded"
+        raise InvalidInputError("--method", args.method, f"no --method with {mode} ({timing})")
+    if args.margin is not None:
+        if not scene:
+            raise InvalidInputError("--margin", args.margin, "no --margin without --scene (the path's clearance)")
+        if not (0 <= args.margin < float("inf")):
+            raise InvalidInputError("--margin", args.margin, "a clearance >= 0 [m]")
+    if not recorded:
+        for option, value in (
+            ("--max-deviation", args.max_deviation),
+            ("--fastest", args.fastest or None),
+            ("--stream", args.stream),
+        ):
+            if value is not None:
+                raise InvalidInputError(option, value, f"no {option} without --recorded or a .mcap bag")
+    elif args.stream is not None and path.suffix.lower() != ".mcap":
+        raise InvalidInputError("--stream", args.stream, "no --stream for a CSV recording (a bag has two streams)")
+    if args.max_deviation is not None and not (0 < args.max_deviation < float("inf")):
+        raise InvalidInputError("--max-deviation", args.max_deviation, "a positive deviation [rad]")
+    args.method = args.method or "jerk"
+    args.margin = 0.01 if args.margin is None else args.margin
+    args.max_deviation = 0.01 if args.max_deviation is None else args.max_deviation
+    args.stream = args.stream or "measured"
 
 
 def load_waypoints(path: Path, joint_names: tuple[str, ...] | None = None) -> tuple[list[str], np.ndarray]:
@@ -70,9 +113,7 @@ def run(args: argparse.Namespace) -> int:
     from taplan.timing import jerk_limited, retime
 
     path = Path(args.file)
-    args.rate = bounded_rate(args.rate, "--rate")
-    if args.margin < 0 or not np.isfinite(args.margin):
-        raise InvalidInputError("--margin", args.margin, "a clearance >= 0 [m]")
+    _validate(args, path)
     in_scene = args.scene is not None or args.scene_from_bag is not None
     default = f"{path.stem}_planned.json" if in_scene else f"{path.stem}_timed.json"
     output = output_path(Path(args.output) if args.output else path.with_name(default), "--output", suffixes=SUFFIXES)

@@ -31,9 +31,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--targets", default=None, help="stream JSON-line targets from this file ('-': stdin)")
     parser.add_argument("--duration", type=float, default=None, help="how long to stream --targets [s]")
     parser.add_argument("--rate", type=float, default=77.0, help="joint_cmd rate [Hz], 50-77 (77)")
-    parser.add_argument("--state-timeout", type=float, default=0.2, help="stop after this long without states [s]")
+    parser.add_argument(
+        "--state-timeout", type=float, default=0.2, help="stop after this long without joint states [s] (0.2)"
+    )
     parser.add_argument("--tracking-error", type=float, default=0.15, help="abort above this error [rad] (0.15)")
-    parser.add_argument("--wait", type=float, default=5.0, help="wait this long for the first joint states [s]")
+    parser.add_argument("--wait", type=float, default=5.0, help="wait this long for the first joint states [s] (5)")
     parser.add_argument("--disable", action="store_true", help="send /api/fsm/enable -1 at the end (robot pauses)")
     parser.add_argument("--record", type=Path, default=None, help="write sent and measured streams (.npz)")
     parser.add_argument(
@@ -61,6 +63,21 @@ def run(args: argparse.Namespace) -> int:
     from taplan.ros.runner import CheckFailedError, Runner, RunnerConfig
     from taplan.trajectory import Trajectory
 
+    for option, value in (
+        ("--state-timeout", args.state_timeout),
+        ("--tracking-error", args.tracking_error),
+        ("--wait", args.wait),
+        ("--hold", args.hold),
+        ("--duration", args.duration),
+    ):
+        if value is not None and not (0 < value < float("inf")):
+            raise InvalidInputError(option, value, "a positive number (seconds; radians for --tracking-error)")
+    if args.record is not None:
+        from taplan.io.paths import output_path
+
+        output_path(args.record, "--record", suffixes=(".npz",))
+    if args.duration is not None and args.targets is None:
+        raise InvalidInputError("--duration", args.duration, "no --duration without --targets (a plan sets its own)")
     modes = [x is not None for x in (args.file, args.hold, args.targets)]
     if sum(modes) != 1:
         raise InvalidInputError(

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from taplan.errors import InvalidInputError
 from taplan.scene.world import CollisionWorld
 from taplan.timing._polynomial import max_abs_derivative
 from taplan.trajectory import Trajectory
@@ -73,6 +74,10 @@ def check_segments(
     """:func:`check_segment` for S segments ``starts[k] → ends[k]`` ((S, nq) each) in one batch: every level of
     halving evaluates the middles of all the intervals not yet certified, of every segment, in one call. A segment
     stops at its first evaluation closer than ``points``. Past ``deadline`` the unfinished segments are invalid."""
+    if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not (0 <= margin < math.inf):
+        raise InvalidInputError("margin", margin, "a clearance >= 0 [m]")
+    if points is not None and not (isinstance(points, (int, float)) and 0 <= points < math.inf):
+        raise InvalidInputError("points", points, "a clearance >= 0 [m] or None")
     starts = np.atleast_2d(np.asarray(starts, dtype=float))
     ends = np.atleast_2d(np.asarray(ends, dtype=float))
     floor = margin / 2

@@ -154,6 +154,23 @@ class RunnerConfig:
     require_fsm: bool = True
     command_velocity: str = "zero"
 
+    def __post_init__(self) -> None:
+        for name in (
+            "rate",
+            "heartbeat_rate",
+            "state_timeout",
+            "tracking_error",
+            "start_tolerance",
+            "wait_timeout",
+            "ready_timeout",
+            "goal_tolerance",
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < float("inf")):
+                raise InvalidInputError(name, value, "a positive, finite number")
+        if not (isinstance(self.settle_time, (int, float)) and 0 <= self.settle_time < float("inf")):
+            raise InvalidInputError("settle_time", self.settle_time, "a time >= 0 [s]")
+
 
 @dataclass
 class RunResult:
@@ -186,9 +203,11 @@ class RunResult:
     rejected_states: int
 
     def save(self, path: Any) -> None:
-        """Write the sent and measured streams to ``path`` (.npz)."""
+        """Write the sent and measured streams to ``path`` (.npz; missing directories are created)."""
+        from taplan.io.paths import output_path
+
         np.savez(
-            path,
+            output_path(path, "path", suffixes=(".npz",)),
             sent_times=self.sent_times,
             sent=self.sent,
             measured_times=self.measured_times,
