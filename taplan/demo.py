@@ -1,6 +1,6 @@
 """The end-to-end demo behind ``taplan demo``: plan, replay, check and compare on the bundled TeleAvatar.
 
-Three plans, each jerk-limited under ``robot.planning_limits`` and starting from the home pose:
+Four plans, each jerk-limited under ``robot.planning_limits`` and starting from the home pose:
 
 1. **reach**: both end effectors to a pair of reachable poses (the FK of ``READY_POSE``, hands ahead of the
    chest), solved with :func:`taplan.ik.solve_pose`;

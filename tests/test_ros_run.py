@@ -335,3 +335,46 @@ def test_cli_streams_pose_targets_from_stdin_like_a_file(robot, start_sim, tmp_p
     done = _cli_run(sim, '{"l_joint1": 9.0}\n', "--duration", "0.5")
     assert done.returncode == 0, done.stdout + done.stderr
     assert "1 joint target streamed, 1 clamped into the joint limits" in done.stdout
+
+
+def test_cli_messages_tell_what_happened(robot, start_sim, tmp_path: Path) -> None:
+    """No "executing" before a state arrived; a hold ends "held", not "plan finished"; SIGTERM is named."""
+    import signal
+
+    plan = tmp_path / "plan.json"
+    _plan(robot, robot.home, 0.1).save(plan)
+    lonely = random.randint(100, 230)
+    command = [sys.executable, "-m", "taplan", "run", str(plan), "--loopback", "--domain-id", str(lonely)]
+    done = subprocess.run([*command, "--wait", "0.5"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "executing" not in done.stdout and "no joint states" in done.stderr
+
+    sim = start_sim(duration=120.0)
+    hold = [sys.executable, "-m", "taplan", "run", "--hold", "0.5", "--loopback", "--domain-id", str(sim.domain)]
+    done = subprocess.run(hold, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "completed: held the position for 0.5 s" in done.stdout and "plan finished" not in done.stdout
+
+    blind = tmp_path / "blind.json"  # home -> across the table's box, planned without the scene: 100 mm into it
+    across = np.array([-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403])
+    right = robot.planning_limits.subset(robot.joint_names[7:])
+    jerk_limited(np.array([robot.home[7:], across]), right).trajectory.save(blind)
+    scene = Path(__file__).resolve().parents[1] / "models" / "teleavatar" / "scenes" / "table.yaml"
+    command = [sys.executable, "-m", "taplan", "run", str(blind), "--scene", str(scene), "--loopback"]
+    done = subprocess.run([*command, "--domain-id", str(sim.domain)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "scene clearance: FAIL" in done.stdout and "/ box at t = " in done.stdout
+    assert "refused: the plan collides with the scene; nothing was sent" in done.stdout
+    assert "executing" not in done.stdout
+
+    long_hold = [*hold[:5], "30", *hold[6:]]
+    process = subprocess.Popen(long_hold, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert process.stdout is not None
+    seen = ""
+    while "holding the measured position" not in seen:
+        line = process.stdout.readline()
+        assert line, seen
+        seen += line
+    time.sleep(0.5)
+    process.send_signal(signal.SIGTERM)
+    out = seen + process.communicate(timeout=60)[0]
+    assert "stopped: interrupted (SIGTERM): stopping" in out and "Ctrl-C" not in out

@@ -27,7 +27,7 @@ def add_transport_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
+    raise KeyboardInterrupt(signal.Signals(signum).name)  # the runner reports it by name, not as Ctrl-C
 
 
 def open_transport(args: argparse.Namespace) -> tuple[Any, Any]:

@@ -12,12 +12,15 @@ re-enables the robot. A robot without ``/fsm_state`` is not driven unless ``--no
 ``taplan plan`` writes (it must start at the robot's current position). ``--targets FILE|-`` instead streams live
 targets for ``--duration`` seconds (JSON lines of joint or pose targets, see :mod:`taplan.ros.targets`) through the
 jerk-limited joint or pose streamer; ``--hold SECONDS`` holds the current position (a heartbeat test). Writes what
-it sent and measured (``--record``, .npz) and the bag (``--bag``).
+it sent and measured (``--record``, .npz) and the bag (``--bag``). ``--scene scene.yaml`` certifies the plan's
+clearance to the scene along its whole timed trajectory (the joints it does not drive where the robot is) and sends
+nothing when anything would touch (exit 1), like ``taplan check PLAN --scene``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -127,7 +130,11 @@ def run(args: argparse.Namespace) -> int:
         elif args.targets is not None:
             result = _stream_targets(runner, robot, args)
         else:
+            runner.wait_for_state()
+            print(f"taplan run: holding the measured position for {args.hold:g} s", flush=True)
             result = runner.stream(lambda t: None, args.hold)
+            if result.status == "completed":
+                result = dataclasses.replace(result, reason=f"held the position for {args.hold:g} s")
     finally:
         interface.close()
         if bag is not None:
@@ -147,7 +154,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _stream_targets(runner, robot, args: argparse.Namespace):  # noqa: ANN001, ANN202 (CLI glue)
-    import dataclasses
     import sys
 
     from taplan.ros.targets import TargetFeed, TargetStreamer

@@ -44,14 +44,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from taplan.errors import InvalidInputError, PlanningError, TimingError
+from taplan.errors import InvalidInputError, PlanningError, TaplanError, TimingError
 from taplan.limits import JointLimits
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
 from taplan.planning.optimize import optimize_path
 from taplan.planning.rrt import rrt_connect_shrinking
 from taplan.planning.verify import MIN_CERTIFIED, SegmentCheck, Verification, check_segment, verify_trajectory
 from taplan.robot import Robot
-from taplan.scene.scene import Scene
+from taplan.scene.scene import Scene, as_pose
 from taplan.scene.world import CollisionWorld
 from taplan.trajectory import Trajectory
 
@@ -259,6 +259,7 @@ def _goal_ik(
     best: dict[bool, np.ndarray] = {}  # clear of the margin (True) or only of the floor (False)
     cost: dict[bool, float] = {True: np.inf, False: np.inf}
     reason = "no IK solution within 1 mm / 0.01 rad"
+    closest = (np.inf, np.inf)  # the best failed IK's position [m] and orientation [rad] error
     moving = np.isin(np.arange(robot.nq), _moving_joints(robot, targets))
     for k, seed_q in enumerate(candidates):
         if time.perf_counter() >= deadline:
@@ -267,6 +268,8 @@ def _goal_ik(
         seed_q = np.where(moving, seed_q, start)
         result = solve_pose(robot, targets, seed_q, limits=limits, restarts=2, seed=k)
         if not result.success:
+            position, orientation = result.position_error.values(), result.orientation_error.values()
+            closest = min(closest, (max(position, default=0.0), max(orientation, default=0.0)))
             continue
         d, pair = world.min_distance(result.q)
         if d < floor:
@@ -279,8 +282,45 @@ def _goal_ik(
         if True in best and k in (0, 2):
             break  # warm start: the start seed's clear solution, or the start and home seeds were tried
     if not best:
+        if reason.startswith("no IK solution") and np.isfinite(closest[0]):
+            reason += f"; the closest ends {closest[0] * 1e3:.1f} mm / {closest[1]:.3f} rad from the target"
+        inside = _targets_inside_obstacles(world, targets)
+        if inside:
+            raise PlanningError(f"goal {sorted(targets)}: {inside} ({reason})")
+        if np.isfinite(closest[0]) and closest[0] > 0.05:
+            raise PlanningError(f"goal {sorted(targets)}: out of reach ({reason})")
         raise PlanningError(f"goal {sorted(targets)}: unreachable without collision ({reason})")
     return best.get(True, best.get(False))
+
+
+def _targets_inside_obstacles(world: CollisionWorld, targets: Mapping[str, Any]) -> str:
+    """``"the target of right_ee is inside box"`` for every target position inside an obstacle, else ``""``."""
+    import coal
+
+    point = coal.Sphere(1e-4)
+    found = []
+    for frame, target in targets.items():
+        try:
+            position = as_pose(target)[:3, 3] if np.shape(target) != (3,) else np.asarray(target, dtype=float)
+        except TaplanError:
+            continue
+        for obstacle in world.scene.obstacles.values():
+            if not hasattr(obstacle.shape, "to_coal"):
+                continue
+            request, result = coal.DistanceRequest(), coal.DistanceResult()
+            request.enable_signed_distance = True
+            T = obstacle.pose
+            d = coal.distance(
+                obstacle.shape.to_coal(),
+                coal.Transform3s(T[:3, :3], T[:3, 3]),
+                point,
+                coal.Transform3s(np.eye(3), position),
+                request,
+                result,
+            )
+            if d < 0:
+                found.append(f"the target of {frame} is inside {obstacle.name}")
+    return "; ".join(found)
 
 
 def _moving_joints(robot: Robot, targets: Mapping[str, Any]) -> np.ndarray:

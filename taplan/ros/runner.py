@@ -561,7 +561,7 @@ class Runner:
             last[0] = np.asarray(state.position, dtype=float)
             return state.position, state.velocity, state.acceleration
 
-        return self._drive(command)
+        return self._drive(command, f"streamed for {duration:g} s")
 
     def _check_target(self, target: Any, current: np.ndarray) -> None:
         """A joint target in collision, or whose straight joint-space path from the current command is not certified
@@ -618,7 +618,9 @@ class Runner:
         log.sent_times.append(now)
         log.sent.append(q.copy())
 
-    def _drive(self, command: Callable[[int], tuple[np.ndarray, np.ndarray, np.ndarray] | None]) -> RunResult:
+    def _drive(
+        self, command: Callable[[int], tuple[np.ndarray, np.ndarray, np.ndarray] | None], done: str = "plan finished"
+    ) -> RunResult:
         cfg = self.config
         log = _Log()
         t0 = self.clock()
@@ -629,7 +631,7 @@ class Runner:
         k = 0
         settle_until: float | None = None
         last_progress = t0
-        status, reason = "completed", "plan finished"
+        status, reason = "completed", done
         last_stamp: float | None = None  # receive time of the last joint state logged
         try:
             while True:
@@ -678,7 +680,7 @@ class Runner:
                         if measured is not None and float(np.max(np.abs(measured[1] - state[0]))) <= cfg.goal_tolerance:
                             break
                         if now >= settle_until:
-                            reason = f"plan finished; not within {cfg.goal_tolerance:g} rad after {cfg.settle_time:g} s"
+                            reason = f"{done}; not within {cfg.goal_tolerance:g} rad after {cfg.settle_time:g} s"
                             break
                         self._publish(state[0], now - t0, log, np.zeros_like(state[0]))
                     else:
@@ -694,8 +696,8 @@ class Runner:
             logger.warning(reason)
             if status != "disabled":  # disabled from outside: not one more command or heartbeat
                 beats += self._brake(state, log, t0)
-        except KeyboardInterrupt:
-            status, reason = "stopped", "interrupted (Ctrl-C): stopping"
+        except KeyboardInterrupt as exc:  # Ctrl-C, or a signal the CLI turned into one (its name in args)
+            status, reason = "stopped", f"interrupted ({exc.args[0] if exc.args else 'Ctrl-C'}): stopping"
             logger.warning(reason)
             beats += self._brake(state, log, t0)
         except Exception as exc:  # any failure while moving ends in a smooth stop, then propagates as a result
