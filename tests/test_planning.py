@@ -127,7 +127,7 @@ def test_bad_inputs(robot) -> None:
         plan_motion(robot, q, q)
     T = np.eye(4)
     T[:3, 3] = [2.0, 0.0, 0.0]  # 2 m in front: out of reach
-    with pytest.raises(PlanningError, match="left_tcp.*unreachable"):
+    with pytest.raises(PlanningError, match=r"left_tcp.*out of reach \(no IK solution"):
         plan_motion(robot, q, {"left_tcp": T}, ik_seeds=1)
     with pytest.raises(InvalidInputError, match="margin"):
         plan_motion(robot, q, q + 0.05, margin=-1.0)
