@@ -476,7 +476,7 @@ def _time_and_verify(
             continue
         verified += 1
         clock = time.perf_counter()
-        if plan is None and certificate is not None and _on_certified_segment(world, middle, path, margin):
+        if how.step is None and certificate is not None and _on_certified_segment(world, middle, path, margin):
             check = Verification(True, certificate.clearance, certificate.pair, 0.0, 0)
         else:
             check = verify_trajectory(world, middle, floor=margin / 4, hold=q0, deadline=deadline)
