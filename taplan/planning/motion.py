@@ -460,8 +460,9 @@ def _time_and_verify(
     first: tuple[float, str] | None = None  # the fastest timing's duration and why it was not used
     verified = 0
     options = _timings(len(path) == 2, max_deviation)
+    took = 0.0  # [s] the longest timing so far: another one starts only if that much of the budget is left
     for rank, how in enumerate(options[:-1]):
-        if rank and time.perf_counter() >= deadline:
+        if rank and time.perf_counter() + took >= deadline:
             break
         clock = time.perf_counter()
         try:
@@ -470,6 +471,7 @@ def _time_and_verify(
             why = f"timing the path failed: {exc}"
             continue
         finally:
+            took = max(took, time.perf_counter() - clock)
             times["timing"] += time.perf_counter() - clock
         if rank:
             candidates.append((middle.duration, rank, how, middle))
@@ -491,7 +493,7 @@ def _time_and_verify(
 
     def last_resort() -> list[tuple[float, int, _Timing, Trajectory]]:
         nonlocal why
-        if time.perf_counter() >= deadline:
+        if time.perf_counter() + took >= deadline:
             return []
         clock = time.perf_counter()
         try:
