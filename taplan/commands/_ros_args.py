@@ -32,10 +32,6 @@ def _interrupt(signum: int, frame: Any) -> None:
 
 def open_transport(args: argparse.Namespace) -> tuple[Any, Any]:
     """(DdsInterface, BagWriter or None) from the parsed options; logging to stderr; SIGTERM acts as Ctrl-C."""
-    from taplan.io.paths import output_path
-
-    if args.bag is not None:  # the one output-path rule, checked before DDS starts
-        output_path(args.bag, "--bag", suffixes=(".mcap",))
     signal.signal(signal.SIGTERM, _interrupt)
     from taplan.ros.bag import BagWriter
     from taplan.ros.dds import DdsInterface, loopback_config
