@@ -30,6 +30,8 @@ from taplan.check import register_collision_check
 
 __all__ = ["ClearanceCheck", "SELF_CLEARANCE", "check_clearance", "robot_world", "teleavatar_world"]
 
+MAX_SAMPLES = 20000  # check(): longer subjects are not certified (notes say so)
+MAX_CERTIFIED_DURATION = 3600.0  # [s] longer plans are refused, not certified (0.1 s windows: memory and time)
 SELF_CLEARANCE = 0.0  # [m] floor of robot-robot pairs: the capsules already enclose the URDF's collision geometry
 
 
@@ -142,6 +144,13 @@ def check_clearance(
         return ClearanceCheck(passed, *found, bodies, pairs, obstacles, evaluations)
 
     if isinstance(subject, Trajectory):
+        duration = float(subject.times[-1] - subject.times[0])
+        if not (math.isfinite(duration) and duration <= MAX_CERTIFIED_DURATION):
+            from taplan.errors import InvalidInputError
+
+            raise InvalidInputError(
+                "trajectory", f"{duration:g} s", f"at most {MAX_CERTIFIED_DURATION:g} s to certify its clearance"
+            )
         v = verify_trajectory(world, subject, floor=floor, hold=base)
         return result(v.collision_free, v.min_clearance, v.pair, v.time, v.evaluations)
     q = np.asarray(subject, dtype=float)
@@ -191,6 +200,13 @@ def _for_check(
             notes.append("collision: not checked (the joints are not the TeleAvatar's; pass clearance=robot)")
             return None
         clearance = world
+    robot = clearance.robot if hasattr(clearance, "robot") else clearance
+    index = robot.indices(names)
+    lower, upper = robot.limits.lower[index] - 0.5, robot.limits.upper[index] + 0.5
+    if q.size and (not np.all(np.isfinite(q)) or np.any(q < lower) or np.any(q > upper) or len(q) > MAX_SAMPLES):
+        # far outside the limits (the limit check fails it) or too long to certify here: no certificate
+        notes.append("collision: not checked (positions far outside the limits, or more than 20000 samples)")
+        return None
     if isinstance(subject, Trajectory):
         return check_clearance(subject, clearance, hold=hold)
     return check_clearance(q, clearance, joint_names=names, times=t, hold=hold)
