@@ -13,6 +13,7 @@ import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
+import pinocchio as pin
 
 # Collision capsules [m], in the frame of the link that carries them: (link, start, end, radius).
 # The vendor ships meshes only; these are sized from the joint origins (segment ends) and a generous estimate of
@@ -48,21 +49,26 @@ FRAMES = [
 TORSO = ("base_link", (0.0, 0.0, -0.08), (0.0, 0.0, -0.45), 0.07)  # torso column below the shoulder line
 
 
+def asked_capsules() -> list[tuple[str, tuple, tuple, float]]:
+    """Every capsule this script writes: (link, start, end, radius) in the link's frame [m]."""
+    return [c for side in CAPSULES.values() for c in side] + [TORSO]
+
+
 def _fmt(values) -> str:
     return " ".join(f"{v:.10g}" for v in values)
 
 
 def _rpy_z_to(direction: np.ndarray) -> tuple[float, float, float]:
-    """rpy of a rotation whose z axis points along ``direction``."""
-    z = direction / np.linalg.norm(direction)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    rot = np.column_stack([x, y, z])
-    pitch = np.arcsin(-rot[2, 0])
-    roll = np.arctan2(rot[2, 1], rot[2, 2])
-    yaw = np.arctan2(rot[1, 0], rot[0, 0])
+    """rpy of a rotation whose z axis points along ``direction``.
+
+    The rotation is the shortest one from z to ``direction`` (a quaternion from the two vectors), converted to rpy
+    by pinocchio; at pitch +-90 deg (a direction in the x-y plane with no z) rpy is not unique, and pinocchio
+    returns one of the equivalent triples, so the round trip rpy -> matrix -> z axis is exact for every direction.
+    An earlier hand-written conversion lost the yaw there and turned the hand capsules 90 deg.
+    """
+    z = np.asarray(direction, float) / np.linalg.norm(direction)
+    rot = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), z).matrix()
+    roll, pitch, yaw = pin.rpy.matrixToRpy(rot)
     return float(roll), float(pitch), float(yaw)
 
 
@@ -78,8 +84,7 @@ def _capsule_element(start, end, radius: float) -> ET.Element:
 def build(vendor_path: str) -> str:
     vendor = ET.parse(vendor_path).getroot()
     robot = ET.Element("robot", name="teleavatar")
-    capsules = {c[0]: c for side in CAPSULES.values() for c in side}
-    capsules[TORSO[0]] = TORSO
+    capsules = {c[0]: c for c in asked_capsules()}
     for element in vendor:
         if element.tag == "link":
             link = ET.SubElement(robot, "link", name=element.get("name"))
