@@ -12,6 +12,9 @@ from taplan.stream import PoseStreamer
 
 MARGIN = 0.02  # [m] DifferentialIK's default collision_margin
 TOL = 1e-3  # [m] linearisation of one step
+# [m] the streamer's jerk-limited follower lags the IK reference (up to 0.05 rad when the damper turns the hand along
+# the table top) and cuts the corner between its samples: the streamed positions may dip this far below the IK's margin
+FOLLOW_TOL = 0.01
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +68,7 @@ def test_streamed_poses_slide_along_the_table(robot, world) -> None:
         streamer.set_target({"left_ee": T})
         state = streamer.step()
         lowest = min(lowest, _table_distance(world, state.position))
-    assert lowest >= MARGIN - TOL
+    assert lowest >= MARGIN - FOLLOW_TOL
     assert _table_distance(world, state.position) == pytest.approx(MARGIN, abs=2e-3)  # resting on the margin
     hand = robot.frame_pose(state.position, "left_ee")[:3, 3]
     assert hand[2] < start[2, 3] - 0.03  # it went down as far as the table allows [m]
