@@ -148,7 +148,7 @@ def test_segment_check_certifies_half_the_margin(robot) -> None:
     world = CollisionWorld(robot, _table_and_panel())
     a = robot.home.copy()
     b = a.copy()
-    b[robot.group("right").indices] += 0.3
+    b[robot.group("right").indices] -= 0.3  # (+0.3 puts the right hand, now along the fingers, into the table)
     check = check_segment(world, a, b, 0.01)
     assert check.valid
     for s in np.linspace(0, 1, 101):  # the certificate holds between its evaluations too
