@@ -8,6 +8,7 @@ Joint vectors are in model order (``Robot.joint_names``); ROS ``JointState.name`
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -109,6 +110,8 @@ class Robot:
         # frame 0 is pinocchio's "universe"; frame 1 the URDF's root link, the frame every T_root_* is in
         self.root_frame: str = self.frame_names[1] if len(self.frame_names) > 1 else self.frame_names[0]
         self.capsules, self.skipped_collision = _load_capsules(self.model, self.urdf_path)
+        # body pairs never checked for collision, from an SRDF next to the URDF (None without one)
+        self.disabled_pairs: frozenset[frozenset[str]] | None = _load_disabled_pairs(self.urdf_path)
 
         if limits is None:
             velocity = np.asarray(self.model.velocityLimit, dtype=float)
@@ -314,9 +317,10 @@ class Robot:
         self.frame_names = tuple(f.name for f in self.model.frames)
 
     def capsule_pairs(self, first: str, second: str) -> list[tuple[Capsule, Capsule]]:
-        """All pairs of capsules between two groups (e.g. ``"left"``, ``"right"``)."""
+        """The pairs of capsules between two groups (e.g. ``"left"``, ``"right"``) that the SRDF does not disable."""
         a, b = (self._group_capsules(g) for g in (first, second))
-        return [(x, y) for x in a for y in b]
+        disabled = self.disabled_pairs or frozenset()
+        return [(x, y) for x in a for y in b if frozenset((x.name, y.name)) not in disabled]
 
     def _group_capsules(self, group: str) -> list[Capsule]:
         joints = set(int(i) + 1 for i in self.group(group).indices)  # pinocchio joint 0 is the universe
@@ -338,6 +342,18 @@ def _load_capsules(model: pin.Model, urdf_path: Path) -> tuple[list[Capsule], li
         return capsules_from_urdf(model, urdf_path)
     except (RuntimeError, ValueError, OSError):  # meshes that cannot be resolved: no capsules
         return [], ["<all: collision geometry could not be loaded>"]
+
+
+def _load_disabled_pairs(urdf_path: Path) -> frozenset[frozenset[str]] | None:
+    from taplan.scene.robot_bodies import read_srdf
+
+    srdf = urdf_path.with_suffix(".srdf")
+    if not srdf.is_file():
+        return None
+    try:
+        return read_srdf(srdf)
+    except (OSError, ET.ParseError) as exc:
+        raise ConfigError(f"{str(srdf)!r}: not a readable SRDF ({exc})") from None
 
 
 def _adjust_pose(path: str | Path) -> np.ndarray:

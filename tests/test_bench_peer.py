@@ -65,7 +65,7 @@ def test_ompl_motion_check_does_not_step_through_a_thin_obstacle(robot: taplan.R
     q_mid = robot.home.copy()
     # a 2 cm ball in the middle of the right forearm at home; the motion sweeps the forearm across it
     world = CollisionWorld(robot, Scene())
-    forearm = next(b for b in world.bodies if b.name == "Link-R4_0")
+    forearm = next(b for b in world.bodies if b.name == "right_link4")
     robot_data = robot.model.createData()
     import pinocchio as pin
 

@@ -197,7 +197,7 @@ def test_optimizer_as_smoother_shortens_a_detour(robot) -> None:
     active = robot.group("right").indices
     start, goal, detour = robot.home.copy(), robot.home.copy(), robot.home.copy()
     goal[active] += [0.4, -0.3, 0.2, -0.5, 0.3, 0.2, 0.1]
-    detour[active] += [-0.5, -0.6, 0.6, -0.1, -0.4, 0.5, 0.4]
+    detour[active] += [-0.5, -0.3, 0.6, -0.1, -0.4, 0.5, 0.4]  # (-0.6 on joint 2: upper arm at the shoulders)
     goal, detour = np.clip(goal, limits.lower, limits.upper), np.clip(detour, limits.lower, limits.upper)
     seed = np.array([start, detour, goal])
     assert world.min_distance(detour)[0] > 0.01 and check_segment(world, start, detour, 0.01).valid

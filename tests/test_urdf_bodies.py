@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 MAKE_URDF = Path(__file__).resolve().parents[1] / "models" / "teleavatar" / "make_urdf.py"
 POINT_TOL = 1e-6  # [m] the file holds 10 significant digits
@@ -24,8 +25,8 @@ def _make_urdf():
     return module
 
 
-def _asked(make_urdf) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
-    return [(link, np.array(a, float), np.array(b, float), r) for link, a, b, r in make_urdf.asked_capsules()]
+def _asked(make_urdf) -> list[tuple[str, str, np.ndarray, np.ndarray, float]]:
+    return [(n, link, np.array(a, float), np.array(b, float), r) for n, link, a, b, r in make_urdf.asked_capsules()]
 
 
 def test_rpy_round_trip_points_z_along_every_direction(rng):
@@ -43,38 +44,36 @@ def test_every_generated_capsule_is_the_one_asked_for(teleavatar):
     make_urdf = _make_urdf()
     asked = _asked(make_urdf)
     model = teleavatar.model
-    built = {}
-    for c in teleavatar.capsules:
-        built.setdefault(c.link, []).append(c)
-    links = {link for link, *_ in asked}
-    assert {"Link-L7", "Link-R7", "Link-L3", "Link-R3", "base_link"} <= links
-    for link, start, end, radius in asked:
+    built = {c.name: c for c in teleavatar.capsules}
+    links = {link for _, link, *_ in asked}
+    assert {f"Link-{s}{k}" for s in "LR" for k in range(1, 8)} | {"base_link"} <= links  # every link, both sides
+    for name, link, start, end, radius in asked:
         frame = model.frames[model.getFrameId(link)]
         # asked in the link frame; taplan's capsules are in the frame of the joint that moves the link
         want = (frame.placement.act(start), frame.placement.act(end))
-        matches = [
-            c
-            for c in built.get(link, [])
-            if abs(c.radius - radius) < RADIUS_TOL
-            and min(
-                max(np.linalg.norm(c.start - want[0]), np.linalg.norm(c.end - want[1])),
-                max(np.linalg.norm(c.start - want[1]), np.linalg.norm(c.end - want[0])),
-            )
-            < POINT_TOL
-        ]
-        assert len(matches) == 1, f"{link}: asked {start} -> {end} r {radius}, built {built.get(link)}"
+        c = built[name]
+        assert c.link == link
+        assert c.radius == pytest.approx(radius, abs=RADIUS_TOL)
+        apart = min(
+            max(np.linalg.norm(c.start - want[0]), np.linalg.norm(c.end - want[1])),
+            max(np.linalg.norm(c.start - want[1]), np.linalg.norm(c.end - want[0])),
+        )
+        assert apart < POINT_TOL, f"{name} on {link}: asked {start} -> {end}, built {c.start} -> {c.end}"
     assert len(teleavatar.capsules) == len(asked)
 
 
-def test_hand_capsule_contains_wrist_centre_and_tool_point(teleavatar, rng):
+def test_arm_bodies_contain_wrist_centre_and_tool_point(teleavatar, rng):
     for side in ("left", "right"):
         for _ in range(5):
             q = rng.uniform(teleavatar.planning_limits.lower, teleavatar.planning_limits.upper)
             data = teleavatar.model.createData()
             pin.forwardKinematics(teleavatar.model, data, q)
-            hand = next(c for c in teleavatar.capsules if c.link == f"Link-{side[0].upper()}7")
-            a, b = hand.world_segment(data)
+            hand = [c for c in teleavatar.capsules if c.link.startswith(f"Link-{side[0].upper()}")]
             for frame in (f"{side}_ee", f"{side}_tcp"):
                 p = teleavatar.frame_pose(q, frame)[:3, 3]
-                s = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
-                assert np.linalg.norm(p - (a + s * (b - a))) < hand.radius, (side, frame)
+                inside = []
+                for c in hand:
+                    a, b = c.world_segment(data)
+                    s = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+                    inside.append(np.linalg.norm(p - (a + s * (b - a))) < c.radius)
+                assert any(inside), (side, frame)

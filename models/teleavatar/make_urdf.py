@@ -5,6 +5,10 @@ inertials) of the vendor's file, drops the meshes, and adds taplan's collision c
 
     python models/teleavatar/make_urdf.py ../shared/reference/teleavatar/urdf20260625.urdf \
         > models/teleavatar/teleavatar.urdf
+    python models/teleavatar/make_urdf.py --srdf models/teleavatar/teleavatar.srdf   # allowed pairs, by sweeping
+
+The SRDF lists the body pairs never checked for collision, classified by sweeping 20,000 seeded configurations
+over the planning limits (``taplan.scene.robot_bodies.sweep_pairs``; ~1 min).
 """
 
 from __future__ import annotations
@@ -15,27 +19,46 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-# Collision capsules [m], in the frame of the link that carries them: (link, start, end, radius).
-# The vendor ships meshes only; these are sized from the joint origins (segment ends) and a generous estimate of
-# the link girth (radius), so they over-approximate the arm. Cylinders in the file stand for capsules of the same
-# radius around the same segment (caps included), which is how taplan reads them.
-CAPSULES = {
-    "L": [
-        ("Link-L3", (0.0, 0.0, 0.1286), (0.0300, 0.0040, -0.1455), 0.050),  # upper arm: shoulder centre to elbow
-        ("Link-L4", (0.0, 0.0, 0.0), (0.2761, -0.0304, 0.0031), 0.045),  # forearm: elbow to wrist centre
-        ("Link-L7", (0.0, 0.0, -0.031), (0.010, 0.200, -0.031), 0.045),  # hand and gripper: wrist centre to fingers
-    ],
-    "R": [
-        ("Link-R3", (0.0, 0.0, 0.1284), (0.0300, -0.0210, -0.1455), 0.050),
-        ("Link-R4", (0.0, 0.0, 0.0), (0.2754, 0.0306, 0.0210), 0.045),
-        ("Link-R7", (0.0, 0.0, -0.031), (0.010, -0.200, -0.031), 0.045),
-    ],
-}
+# Collision capsules [m]: (name, link, start, end, radius), start/end in the frame of the link that carries them
+# ("root": taplan's root frame shoulder_base, x forward, y left, z up; written on base_link). Fitted to the real
+# body's surface (the TeleAvatar 2.0's published convex collision pieces, placed by its kinematics) by
+# ``models/teleavatar/real_body.py fit``: every reference point of tests/data/real_body_points.npz is inside (the
+# coverage table is in docs/robot.md). One capsule per arm link, two for the gripper body, one for the wrist
+# camera, one per finger over the whole opening range; the torso as head, shoulders and torso. Cylinders in the
+# file stand for capsules of the same radius around the same segment (caps included), which is how taplan reads
+# them.
+CAPSULES = [
+    ("left_link1", "Link-L1", (-0.0016, 0.005, 0.0222), (0.0025, -0.019, -0.1287), 0.0730),
+    ("left_link2", "Link-L2", (0.1002, -0.0011, 0.015), (-0.0061, 0.0043, -0.0001), 0.0501),
+    ("left_link3", "Link-L3", (0.0002, 0.0005, -0.0227), (0.0202, -0.0184, -0.1385), 0.0723),
+    ("left_link4", "Link-L4", (0.0761, -0.0371, 0.0034), (0.0794, -0.0061, 0.0198), 0.0449),
+    ("left_link5", "Link-L5", (-0.0009, -0.0011, -0.0156), (-0.0097, -0.0023, -0.15), 0.0609),
+    ("left_link6", "Link-L6", (0.0023, -0.0068, -0.0138), (0.0008, -0.0037, -0.0416), 0.0428),
+    ("left_gripper_0", "Link-L7", (0.0018, 0.0817, -0.0293), (-0.0211, 0.0983, -0.0397), 0.0383),
+    ("left_gripper_1", "Link-L7", (-0.0005, -0.0021, -0.0063), (-0.0049, 0.0348, -0.0034), 0.0191),
+    ("left_wrist_camera", "Link-L7", (0.043, 0.094, -0.0133), (0.0434, 0.0933, -0.0563), 0.0235),
+    ("left_fingers_0", "Link-L7", (0.0004, 0.136, -0.0728), (-0.0033, 0.2076, -0.0596), 0.0346),
+    ("left_fingers_1", "Link-L7", (-0.0046, 0.2072, -0.01), (-0.0003, 0.1362, 0.0031), 0.0345),
+    ("right_link1", "Link-R1", (-0.0032, 0.0012, 0.0211), (0.0194, -0.0036, -0.1285), 0.0732),
+    ("right_link2", "Link-R2", (-0.0979, 0.0006, 0.0193), (0.0087, 0.0051, 0.0004), 0.0504),
+    ("right_link3", "Link-R3", (-0.0019, -0.0017, -0.0045), (0.0216, 0.0185, -0.1397), 0.0723),
+    ("right_link4", "Link-R4", (0.0802, 0.0356, 0.0226), (0.0755, 0.0122, 0.0296), 0.0454),
+    ("right_link5", "Link-R5", (0.0004, 0.0018, -0.0172), (-0.008, 0.0017, -0.1514), 0.0609),
+    ("right_link6", "Link-R6", (0.0023, 0.0046, -0.0135), (-0.0004, 0.0027, -0.0426), 0.0418),
+    ("right_gripper_0", "Link-R7", (-0.0011, -0.0793, -0.0325), (-0.0167, -0.0973, -0.0375), 0.0388),
+    ("right_gripper_1", "Link-R7", (0.0004, -0.0007, -0.0061), (-0.0053, -0.0368, -0.004), 0.0192),
+    ("right_wrist_camera", "Link-R7", (0.0443, -0.0958, -0.011), (0.0446, -0.0953, -0.0549), 0.0234),
+    ("right_fingers_0", "Link-R7", (0.0003, -0.2098, -0.0576), (0.0015, -0.1384, -0.0707), 0.0346),
+    ("right_fingers_1", "Link-R7", (0.0002, -0.2111, -0.0096), (0.0021, -0.1379, 0.0053), 0.0346),
+    ("head", "root", (-0.0012, 0.0455, 0.1976), (-0.0044, -0.0346, 0.186), 0.1356),
+    ("shoulders", "root", (-0.0214, 0.0278, 0.0263), (-0.0147, -0.0302, 0.021), 0.1794),
+    ("torso", "root", (-0.0346, -0.0064, -0.1577), (-0.0278, 0.0063, -0.1641), 0.1636),
+]
 
 # Named frames: (name, parent link, xyz [m], rpy [rad]).
 FRAMES = [
     # Wrist centre (where the joint-6 and joint-7 axes meet), axes of Link-7: x forward, y left, z up at q = 0.
-    # This is the point and orientation the robot's own end-effector interface reports (see models/README.md).
+    # This is the point and orientation the robot's own end-effector interface reports (see docs/conventions.md).
     ("left_ee", "Link-L7", (0.0, 0.0, -0.031), (0.0, 0.0, 0.0)),
     ("right_ee", "Link-R7", (0.0, 0.0, -0.031), (0.0, 0.0, 0.0)),
     # Midpoint of the two finger bases, same axes as *_ee: a grasp point for tasks that need the fingers.
@@ -46,12 +69,19 @@ FRAMES = [
     ("right_shoulder_base", "shoulder_base", (0.0, -0.2201, 0.0019), (0.0, 0.0, 0.0)),
 ]
 
-TORSO = ("base_link", (0.0, 0.0, -0.08), (0.0, 0.0, -0.45), 0.07)  # torso column below the shoulder line
+# base_link is shoulder_base turned +90 deg about z (the vendor's joint shoulder_base_to_base)
+_ROOT_TO_BASE_LINK = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
-def asked_capsules() -> list[tuple[str, tuple, tuple, float]]:
-    """Every capsule this script writes: (link, start, end, radius) in the link's frame [m]."""
-    return [c for side in CAPSULES.values() for c in side] + [TORSO]
+def asked_capsules() -> list[tuple[str, str, tuple, tuple, float]]:
+    """Every capsule this script writes: (name, link, start, end, radius) in that link's frame [m]."""
+    out = []
+    for name, link, start, end, radius in CAPSULES:
+        if link == "root":
+            link = "base_link"
+            start, end = (tuple((_ROOT_TO_BASE_LINK @ np.asarray(p, float)).tolist()) for p in (start, end))
+        out.append((name, link, tuple(start), tuple(end), radius))
+    return out
 
 
 def _fmt(values) -> str:
@@ -72,9 +102,9 @@ def _rpy_z_to(direction: np.ndarray) -> tuple[float, float, float]:
     return float(roll), float(pitch), float(yaw)
 
 
-def _capsule_element(start, end, radius: float) -> ET.Element:
+def _capsule_element(name: str, start, end, radius: float) -> ET.Element:
     start, end = np.asarray(start, float), np.asarray(end, float)
-    collision = ET.Element("collision")
+    collision = ET.Element("collision", name=name)
     ET.SubElement(collision, "origin", xyz=_fmt((start + end) / 2), rpy=_fmt(_rpy_z_to(end - start)))
     geometry = ET.SubElement(collision, "geometry")
     ET.SubElement(geometry, "cylinder", radius=f"{radius:g}", length=f"{np.linalg.norm(end - start):.6g}")
@@ -84,16 +114,17 @@ def _capsule_element(start, end, radius: float) -> ET.Element:
 def build(vendor_path: str) -> str:
     vendor = ET.parse(vendor_path).getroot()
     robot = ET.Element("robot", name="teleavatar")
-    capsules = {c[0]: c for c in asked_capsules()}
+    capsules: dict[str, list] = {}
+    for name, link, start, end, radius in asked_capsules():
+        capsules.setdefault(link, []).append((name, start, end, radius))
     for element in vendor:
         if element.tag == "link":
             link = ET.SubElement(robot, "link", name=element.get("name"))
             inertial = element.find("inertial")
             if inertial is not None:
                 link.append(inertial)
-            if link.get("name") in capsules:
-                _, start, end, radius = capsules[link.get("name")]
-                link.append(_capsule_element(start, end, radius))
+            for name, start, end, radius in capsules.get(link.get("name"), []):
+                link.append(_capsule_element(name, start, end, radius))
         elif element.tag == "joint":
             joint = ET.SubElement(robot, "joint", name=element.get("name"), type=element.get("type"))
             for child in element:
@@ -110,11 +141,32 @@ def build(vendor_path: str) -> str:
         '<?xml version="1.0"?>\n'
         "<!-- taplan's kinematic model of the TeleAvatar (TA1.0) dual arm. Root shoulder_base: midpoint of the\n"
         "     shoulders, x forward, y left, z up. Joint origins, axes, limits and inertials carry the numbers of the\n"
-        "     vendor's urdf20260625; no meshes. Collision cylinders are read by taplan as capsules. Generated by\n"
-        "     models/teleavatar/make_urdf.py. -->\n"
+        "     vendor's urdf20260625; no meshes. Collision cylinders are read by taplan as capsules, fitted to the\n"
+        "     real body by models/teleavatar/real_body.py. Generated by models/teleavatar/make_urdf.py. -->\n"
     )
     return header + ET.tostring(robot, encoding="unicode") + "\n"
 
 
+def write_srdf(path: str) -> None:
+    import taplan
+    from taplan.scene.robot_bodies import robot_bodies, sweep_pairs
+    from taplan.scene.robot_bodies import write_srdf as write
+
+    robot = taplan.Robot.teleavatar()
+    bodies = robot_bodies(robot)
+    allowed, lowest = sweep_pairs(robot, bodies, samples=20000, seed=0)
+    header = (
+        "Body pairs never checked for collision (MoveIt's disable_collisions, naming taplan's bodies), from\n"
+        "     sweeping 20000 seeded configurations over the planning limits\n"
+        "     (models/teleavatar/make_urdf.py, option srdf)"
+    )
+    write(path, "teleavatar", allowed, header)
+    checked = len(lowest) - len(allowed)
+    sys.stderr.write(f"{len(allowed)} pairs allowed, {checked} checked, of {len(lowest)}\n")
+
+
 if __name__ == "__main__":
-    sys.stdout.write(build(sys.argv[1]))
+    if sys.argv[1] == "--srdf":
+        write_srdf(sys.argv[2])
+    else:
+        sys.stdout.write(build(sys.argv[1]))

@@ -2,7 +2,8 @@
 
 taplan represents each collision body as a capsule: a segment with a radius. A URDF ``<cylinder>`` collision element
 (axis along its local z, centred at its origin) is read as the capsule of the same radius around the same segment,
-which contains the cylinder. Other shapes are ignored (listed in ``skipped``). The distance between two capsules is
+which contains the cylinder; it keeps the element's ``name`` attribute when it has one (pinocchio numbers a link's
+elements ``<link>_<i>``). Other shapes are ignored (listed in ``skipped``). The distance between two capsules is
 the distance between their segments minus both radii, computed in closed form.
 """
 
@@ -50,6 +51,7 @@ def capsules_from_urdf(model: pin.Model, urdf_path: str | Path) -> tuple[list[Ca
         The capsules, and the names of collision objects that are not cylinders (skipped).
     """
     geometry = pin.buildGeomFromUrdf(model, str(urdf_path), pin.GeometryType.COLLISION)
+    names = _collision_names(urdf_path)
     capsules: list[Capsule] = []
     skipped: list[str] = []
     for obj in geometry.geometryObjects:
@@ -62,8 +64,25 @@ def capsules_from_urdf(model: pin.Model, urdf_path: str | Path) -> tuple[list[Ca
         start = placement.act(np.array([0.0, 0.0, -half]))
         end = placement.act(np.array([0.0, 0.0, half]))
         link = model.frames[obj.parentFrame].name
-        capsules.append(Capsule(obj.name, link, int(obj.parentJoint), start, end, float(shape.radius)))
+        name = names.get(obj.name, obj.name)
+        capsules.append(Capsule(name, link, int(obj.parentJoint), start, end, float(shape.radius)))
     return capsules, skipped
+
+
+def _collision_names(urdf_path: str | Path) -> dict[str, str]:
+    """pinocchio's ``<link>_<i>`` geometry names -> the URDF collision elements' own ``name`` attributes."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(str(urdf_path)).getroot()
+    except (ET.ParseError, OSError):
+        return {}
+    out = {}
+    for link in root.iter("link"):
+        for i, collision in enumerate(link.findall("collision")):
+            if collision.get("name"):
+                out[f"{link.get('name')}_{i}"] = collision.get("name")
+    return out
 
 
 def segment_closest_points(

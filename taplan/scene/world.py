@@ -25,7 +25,7 @@ import pinocchio as pin
 from taplan.errors import CollisionError, InvalidInputError
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import Scene
-from taplan.scene.shapes import HalfSpace
+from taplan.scene.shapes import Box, HalfSpace
 
 if TYPE_CHECKING:
     from taplan.robot import Robot
@@ -234,6 +234,16 @@ class CollisionWorld:
         self._item_center = np.array([item.pose[:3, 3] for item in self._items]).reshape(-1, 3)
         self._item_normal = np.array([item.pose[:3, 2] for item in self._items]).reshape(-1, 3)
         self._item_radius = np.array([item.radius for item in self._items])
+        # each item's rotation and local half extents: boxes bound capsules far tighter than bounding spheres
+        self._item_rotation = np.array([item.pose[:3, :3] for item in self._items]).reshape(-1, 3, 3)
+        self._item_half = np.array(
+            [
+                np.asarray(o.shape.size, float) / 2 if isinstance(o.shape, Box) else np.full(3, item.radius)
+                for o, item in zip(
+                    [o for o in obstacles if not hasattr(o.shape, "capsule_distances")], self._items, strict=True
+                )
+            ]
+        ).reshape(-1, 3)
         self._half_index = np.array([k for k, item in enumerate(self._items) if item.halfspace], dtype=int)
         self._solid_index = np.array([k for k, item in enumerate(self._items) if not item.halfspace], dtype=int)
         for item in self._items:
@@ -521,6 +531,14 @@ class CollisionWorld:
             gap = (
                 np.linalg.norm(nearest - center[:, None, :], axis=2) - radius[None] - self._item_radius[solid][:, None]
             )
+            # the capsule's box in the item's frame against the item's own box: another lower bound
+            R, h = self._item_rotation[solid], self._item_half[solid][:, None, :]
+            a0 = np.einsum("sji,sbj->sbi", R, s0[None] - center[:, None, :])
+            a1 = np.einsum("sji,sbj->sbi", R, s1[None] - center[:, None, :])
+            lo = np.minimum(a0, a1) - radius[None, :, None]
+            hi = np.maximum(a0, a1) + radius[None, :, None]
+            apart = np.linalg.norm(np.maximum(np.maximum(lo - h, -h - hi), 0.0), axis=2)
+            gap = np.where(apart > 0.0, np.maximum(gap, apart), gap)  # a bound of positive distances only
             d[solid] = gap
             mid = (s0 + s1) / 2
             away = mid[None] - center[:, None, :]
@@ -639,10 +657,8 @@ class CollisionWorld:
 
     def _coal_placement(self, rotation: np.ndarray, origin: np.ndarray, k: int) -> Any:
         """Body ``k``'s coal transform when its joint is at (``rotation``, ``origin``) in the root frame."""
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = rotation, origin
-        T = T @ self._body_geometry[k][1]
-        return self._coal.Transform3s(T[:3, :3], T[:3, 3])
+        local = self._body_geometry[k][1]
+        return self._coal.Transform3s(rotation @ local[:3, :3], rotation @ local[:3, 3] + origin)
 
     def _body_geometry_at(self, k: int, transforms: list[Any]) -> tuple[Any, Any]:
         return self._body_geometry[k][0], transforms[k]
@@ -659,8 +675,18 @@ class CollisionWorld:
         return d, pa, pb, n
 
     def min_distance(self, q: npt.ArrayLike) -> tuple[float, tuple[str, str]]:
-        """The smallest signed distance [m] over the active pairs, and its pair."""
-        return self.distances(q, jacobian=False).closest()
+        """The smallest signed distance [m] over the active pairs, and its pair.
+
+        Branch and bound: robot-obstacle pairs first as lower bounds (bounding spheres and boxes, no coal query);
+        only those whose bound is below the smallest exact distance are then queried exactly.
+        """
+        coarse = self.distances(q, jacobian=False, bound_beyond=-math.inf)
+        bounded = {self._items[k].name for k in self._solid_index} | {o.name for o in self._fields}
+        exact = [d for (_, b), d in zip(coarse.pairs, coarse.distance, strict=True) if b not in bounded]
+        best = min(exact, default=math.inf)
+        if len(coarse.distance) and float(np.min(coarse.distance)) < best:
+            return self.distances(q, jacobian=False, bound_beyond=best).closest()
+        return coarse.closest()
 
     def in_collision(self, q: npt.ArrayLike, *, margin: float | None = None) -> bool:
         """True when a pair is closer than ``margin`` [m] (default ``self.margin``)."""

@@ -1,0 +1,405 @@
+"""Reference surface points of the TeleAvatar 2.0's real body in taplan's link frames, and capsules fitted to them.
+
+Provenance script, not part of the package.
+
+Source: the public repository Matisse06/AgenticTeleAvatar2.0 (``model/robot.xml`` @275c432, MuJoCo model built
+from the vendor's teleavatar_urdf_20260928-v2, and ``model/assets/collision/*.obj`` @98399bd, CoACD convex pieces
+of the vendor's collision meshes). Its vertices were read through a text index and transcribed (rounded to 1 mm,
+representative subsets: every ring and every extreme of each piece, not every vertex) into one file per MuJoCo
+body, ``<body>.txt`` with lines ``x y z`` in mm in that body's frame. The body placements used are in
+``BODY_CHAIN`` / ``GRIPPER`` below (numbers from robot.xml).
+
+What the reference set covers (and what it does not):
+
+* left arm links 1, 3, 5, 6 (single convex hulls), link 2 (4 of its 16 pieces: both ends), link 4 (4 of 16);
+* the gripper body (14 of 32 pieces: its whole extent), the fingers (``rg-link3``; the other finger is its mirror
+  image: same mass and hull volume, centre of mass mirrored), the wrist camera (``rg-link8``); the finger
+  linkage's meshes are not in the index: its bars are represented by their joint-to-joint axes;
+* the torso and head housing (``body_link``, one hull: torso front/back, shoulder flanges, neck and head);
+* not covered: the lift carriage and mobile base below the torso (out of the arms' reach at the table), the head
+  camera module (``eye_Link``, 65 cm3, inside the head housing's hull).
+
+The right arm is the left arm's mirror image through the sagittal plane (taplan's rule ``q_left = -q_right``);
+this script checks that against the right shoulder link's own mesh (``R1_check.txt``). Frames: a MuJoCo body's
+frame is mapped to taplan's joint frame by forward kinematics of both models at the same joint angles; the
+mapping must not depend on the configuration (checked: see ``points``' report).
+
+Usage::
+
+    python models/teleavatar/real_body.py points RAW_DIR    # -> tests/data/real_body_points.npz, with a report
+    python models/teleavatar/real_body.py fit               # capsules fitted to the npz, for make_urdf.py
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+ROOT = Path(__file__).resolve().parents[2]
+NPZ = ROOT / "tests" / "data" / "real_body_points.npz"
+
+# MuJoCo body placements (pos [m], quat wxyz) and hinge axes, from robot.xml; root: body_link.
+BODY_CHAIN = {
+    "L": [
+        ((-0.1005, 0.0002, 0.0), (0.707106781187, 0, 0.707106781187, 0), (0, 0, 1)),
+        ((0, 0, -0.1195), (0.5, -0.5, -0.5, -0.5), (0, 0, -1)),
+        ((-0.134, 0, 0), (0.5, 0.5, -0.5, -0.5), (0, 0, -1)),
+        ((0, 0.03, 0.14), (0.707106781187, 0, 0.707106781187, 0), (0, 0, -1)),
+        ((-0.1135, -0.03, 0), (0.5, -0.5, 0.5, -0.5), (0, 0, 1)),
+        ((0, 0, -0.162), (4.32978028118e-17, 0.707106781187, -4.32978028118e-17, 0.707106781187), (0, 0, -1)),
+        ((0, 0.021, 0), (4.32978028118e-17, -4.32978028118e-17, 0.707106781187, 0.707106781187), (0, 0, -1)),
+    ],
+    "R": [
+        ((0.1005, 0.0002, 0.0), (0.707106781187, 0, -0.707106781187, 0), (0, 0, 1)),
+        ((0, 0, -0.1195), (0.5, -0.5, 0.5, 0.5), (0, 0, -1)),
+        ((0.134, 0, 0), (0.5, -0.5, -0.5, 0.5), (0, 0, 1)),
+        ((0, -0.03, -0.14), (4.32978028118e-17, 0.707106781187, 4.32978028118e-17, -0.707106781187), (0, 0, -1)),
+        ((0.1135, -0.03, 0), (0.707106781187, 0, -0.707106781187, 0), (0, 0, 1)),
+        ((0, 0, -0.162), (0.5, -0.5, 0.5, 0.5), (0, 0, 1)),
+        ((0, -0.021, 0), (0.707106781187, -0.707106781187, 0, 0), (0, 0, 1)),
+    ],
+}
+# Gripper bodies in the gripper base frame: finger carrier (link2/link5), finger (link3/link6) in the carrier,
+# camera (link8). Joints about local z; the input q (0 closed .. 1 open) drives j2 = -0.98 q, j3 = -j2, j5 = -j2,
+# j6 = j2 (robot.xml's equality constraints).
+_Q90X = (0.707106781187, -0.707106781187, 0, 0)
+_CAMERA_QUAT = (0.122787803969, -0.69636424032, -0.122787803969, -0.69636424032)
+GRIPPER = {
+    "L": {
+        "carrier_a": ((0.10439, -0.0068, 0.023086), _Q90X),
+        "carrier_b": ((0.10439, -0.0068, -0.066086), _Q90X),
+        "camera": ((0.074215, -0.053784, -0.0215), _CAMERA_QUAT),
+    },
+    "R": {
+        "carrier_a": ((0.10439, -0.0068, 0.066086), _Q90X),
+        "carrier_b": ((0.10439, -0.0068, -0.023086), _Q90X),
+        "camera": ((0.074215, -0.053784, 0.0215), _CAMERA_QUAT),
+    },
+}
+FINGER_A = (0.040146, 0.022457, 0.0)  # finger joint in carrier a
+FINGER_B = (0.040098, -0.022543, 0.0001)  # finger joint in carrier b
+SHOULDER_SITE = ((-0.22, 0.0002, 0.0), (0.707106781187, 0, 0, 0.707106781187))  # left_shoulder_base in body_link
+OPENINGS = np.linspace(0.0, 1.0, 6)  # gripper input samples for the fingers' reference points
+
+
+def _se3(pos, quat) -> pin.SE3:
+    w, x, y, z = quat
+    return pin.SE3(pin.Quaternion(w, x, y, z).normalized().matrix(), np.asarray(pos, float))
+
+
+def _rz(angle: float) -> pin.SE3:
+    return pin.SE3(pin.utils.rotate("z", angle), np.zeros(3))
+
+
+def _load(raw: Path, name: str, surface: bool = True) -> np.ndarray:
+    """The transcribed vertices of ``name`` [m] and, with ``surface``, points sampled on each convex piece's
+    hull (pieces are separated by ``# piece`` lines; a file without them is one hull), about one per
+    ``SURFACE_SPACING`` squared: the real body is the pieces' hulls, not only their vertices."""
+    pieces: list[list[list[str]]] = [[]]
+    for line in (raw / f"{name}.txt").read_text().splitlines():
+        if line.startswith("# piece") and pieces[-1]:
+            pieces.append([])
+        elif line and line[0] != "#":
+            pieces[-1].append(line.split())
+    out = []
+    for rows in pieces:
+        vertices = np.array(rows, dtype=float) / 1000.0
+        out.append(vertices)
+        if surface and len(vertices) >= 4:
+            out.append(_hull_samples(vertices))
+    return np.vstack(out)
+
+
+SURFACE_SPACING = 0.01  # [m]
+
+
+def _hull_samples(vertices: np.ndarray) -> np.ndarray:
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(vertices)
+    except QhullError:  # flat piece: its vertices are all there is
+        return np.zeros((0, 3))
+    rng = np.random.default_rng(len(vertices))
+    tri = vertices[hull.simplices]  # (F, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    count = int(np.ceil(area.sum() / SURFACE_SPACING**2))
+    face = rng.choice(len(tri), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1.0
+    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+    t = tri[face]
+    return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+
+
+def mujoco_chain(side: str, q: np.ndarray) -> list[pin.SE3]:
+    """Placements of bodies 1..7 (link 7 = gripper base) in body_link at taplan joint angles ``q`` (7,)."""
+    T, out = pin.SE3.Identity(), []
+    for (pos, quat, axis), angle in zip(BODY_CHAIN[side], q, strict=True):
+        T = T * _se3(pos, quat) * pin.SE3(pin.AngleAxis(angle, np.asarray(axis, float)).matrix(), np.zeros(3))
+        out.append(T)
+    return out
+
+
+def root_alignment(robot) -> pin.SE3:
+    """taplan root (shoulder_base) <- MuJoCo body_link, from the left shoulder-base site and frame."""
+    site = _se3(*SHOULDER_SITE)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.home)
+    return data.oMf[robot.model.getFrameId("left_shoulder_base")] * site.inverse()
+
+
+def link_fixes(robot, side: str, configs: np.ndarray) -> tuple[list[pin.SE3], np.ndarray, np.ndarray]:
+    """Per link 1..7: taplan joint frame <- MuJoCo body frame, its spread over ``configs`` (rotation [rad],
+    translation [m]) and the joint-origin distances between the models."""
+    X = root_alignment(robot)
+    model, data = robot.model, robot.model.createData()
+    names = [f"{side.lower()}_joint{k}" for k in range(1, 8)]
+    joints = [model.getJointId(n) for n in names]
+    idx = robot.indices(names)
+    fixes: list[list[pin.SE3]] = [[] for _ in range(7)]
+    origin_error = np.zeros((len(configs), 7))
+    for c, q in enumerate(configs):
+        pin.forwardKinematics(model, data, q)
+        mj = mujoco_chain(side, q[idx])
+        for k in range(7):
+            fixes[k].append(data.oMi[joints[k]].inverse() * X * mj[k])
+            origin_error[c, k] = np.linalg.norm(data.oMi[joints[k]].translation - (X * mj[k]).translation)
+    mean, rot_spread, trans_spread = [], np.zeros(7), np.zeros(7)
+    for k in range(7):
+        ref = fixes[k][0]
+        rot_spread[k] = max(np.linalg.norm(pin.log3(ref.rotation.T @ f.rotation)) for f in fixes[k])
+        trans_spread[k] = max(np.linalg.norm(f.translation - ref.translation) for f in fixes[k])
+        mean.append(ref)
+    return mean, np.stack([rot_spread, trans_spread]), origin_error
+
+
+def gripper_points(raw: Path, side: str, opening: float) -> dict[str, np.ndarray]:
+    """Gripper parts in the gripper base frame at input ``opening`` (0 closed, 1 open)."""
+    g = GRIPPER[side]
+    base = _load(raw, "lg_base")
+    if side == "R":  # the right gripper base is the left one mirrored through its x-y plane (robot.xml inertials)
+        base = base * np.array([1.0, 1.0, -1.0])
+    finger = _load(raw, "rg_link3")
+    finger_b = finger * np.array([1.0, -1.0, 1.0])
+    j2 = -0.98 * opening
+    Ta = _se3(*g["carrier_a"]) * _rz(j2)
+    Tb = _se3(*g["carrier_b"]) * _rz(-j2)
+    Fa = Ta * _se3(FINGER_A, (1, 0, 0, 0)) * _rz(-j2)
+    Fb = Tb * _se3(FINGER_B, (1, 0, 0, 0)) * _rz(j2)
+    # linkage bars: their joint-to-joint axes (their meshes are not available)
+    t = np.linspace(0.0, 1.0, 6)[:, None]
+    bars = np.vstack(
+        [Ta.translation + t * (Fa.translation - Ta.translation), Tb.translation + t * (Fb.translation - Tb.translation)]
+    )
+    camera = _se3(*g["camera"])
+    return {
+        "gripper": base,
+        "camera": (camera.rotation @ _load(raw, "rg_link8").T).T + camera.translation,
+        "fingers": np.vstack(
+            [(Fa.rotation @ finger.T).T + Fa.translation, (Fb.rotation @ finger_b.T).T + Fb.translation, bars]
+        ),
+    }
+
+
+def derive(raw: Path) -> None:
+    import taplan
+
+    robot = taplan.Robot.teleavatar()
+    rng = np.random.default_rng(25)
+    lim = robot.planning_limits
+    configs = np.vstack([robot.home, rng.uniform(lim.lower, lim.upper, size=(8, robot.nq))])
+    out: dict[str, np.ndarray] = {}
+    report = []
+    fixes = {}
+    for side in ("L", "R"):
+        mean, spread, origin = link_fixes(robot, side, configs)
+        fixes[side] = mean
+        report.append(
+            f"{side}: frame-map spread over 9 configs: rotation {np.degrees(spread[0]).max():.3f} deg, "
+            f"translation {1000 * spread[1].max():.2f} mm; joint origins apart max "
+            f"{1000 * origin.max():.1f} mm (per joint {np.round(1000 * origin.max(axis=0), 1).tolist()})"
+        )
+    X = root_alignment(robot)
+    # left arm links 1-6 from the left meshes
+    for k in range(1, 7):
+        pts = _load(raw, f"armL{k}")
+        T = fixes["L"][k - 1]
+        out[f"Link-L{k}"] = (T.rotation @ pts.T).T + T.translation
+    # right arm links 1-6: mirror images of the left ones through taplan's x-z plane, at q_right = -q_left
+    model, data_l = robot.model, robot.model.createData()
+    M = np.diag([1.0, -1.0, 1.0])
+    li, ri = robot.group("left").indices, robot.group("right").indices
+    mirror_spread = 0.0
+    for k in range(1, 7):
+        jl, jr = model.getJointId(f"l_joint{k}"), model.getJointId(f"r_joint{k}")
+        estimates = []
+        for q in configs:
+            qq = q.copy()
+            qq[ri] = -q[li]
+            pin.forwardKinematics(model, data_l, qq)
+            world = (data_l.oMi[jl].rotation @ out[f"Link-L{k}"].T).T + data_l.oMi[jl].translation
+            mirrored = world @ M.T
+            Tr = data_l.oMi[jr]
+            estimates.append((Tr.rotation.T @ (mirrored - Tr.translation).T).T)
+        mirror_spread = max(mirror_spread, max(np.abs(e - estimates[0]).max() for e in estimates))
+        out[f"Link-R{k}"] = estimates[0]
+    report.append(f"mirror map left->right: points move by at most {1000 * mirror_spread:.2f} mm over 9 configs")
+    # check the mirror against the right shoulder link's own mesh points
+    check = _load(raw, "R1_check", surface=False)
+    T = fixes["R"][0]
+    own = (T.rotation @ check.T).T + T.translation
+    gap = np.array([np.min(np.linalg.norm(out["Link-R1"] - p, axis=1)) for p in own])
+    report.append(
+        f"right link 1 own mesh vs mirrored left: nearest mirrored point {1000 * np.median(gap):.1f} mm "
+        f"(median), {1000 * gap.max():.1f} mm (max) away over {len(own)} points"
+    )
+    # grippers: parts in Link-7 (fingers per opening)
+    for side in ("L", "R"):
+        T = fixes[side][6]
+        for s in OPENINGS:
+            parts = gripper_points(raw, side, float(s))
+            for name, pts in parts.items():
+                key = f"Link-{side}7/{name}" + (f"@{s:.1f}" if name == "fingers" else "")
+                out[key] = (T.rotation @ pts.T).T + T.translation
+    # torso and head housing, fixed to the root (taplan joint 0 frame = shoulder_base)
+    torso = _load(raw, "body_link")
+    out["root/torso"] = (X.rotation @ torso.T).T + X.translation
+    NPZ.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(NPZ, **{k: np.round(v, 4).astype(np.float32) for k, v in out.items()})
+    print("\n".join(report))
+    print(f"wrote {NPZ.relative_to(ROOT)}: {sum(len(v) for v in out.values())} points in {len(out)} sets")
+
+
+# ----------------------------------------------------------------------------------------------- fitting
+def segment_distances(P: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances [m] of points ``P`` (N, 3) to the segment [a, b]."""
+    d = b - a
+    L2 = float(d @ d)
+    t = np.zeros(len(P)) if L2 < 1e-18 else np.clip((P - a) @ d / L2, 0.0, 1.0)
+    return np.linalg.norm(P - (a + t[:, None] * d), axis=1)
+
+
+def capsule_volume(a: np.ndarray, b: np.ndarray, r: float) -> float:
+    return float(np.pi * r * r * np.linalg.norm(b - a) + 4.0 / 3.0 * np.pi * r**3)
+
+
+def fit_capsule(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The smallest-volume capsule (found by Nelder-Mead over the end points) containing every point of ``P``."""
+    from scipy.optimize import minimize
+
+    c = P.mean(axis=0)
+    _, _, vt = np.linalg.svd(P - c, full_matrices=False)
+    axis = vt[0]
+    s = (P - c) @ axis
+    best = None
+    for shrink in (0.0, 0.2, 0.4):  # start points: the axis through the extremes, shortened
+        lo, hi = s.min() * (1 - shrink), s.max() * (1 - shrink)
+        x0 = np.concatenate([c + lo * axis, c + hi * axis])
+
+        def volume(x: np.ndarray) -> float:
+            return capsule_volume(x[:3], x[3:], float(segment_distances(P, x[:3], x[3:]).max()))
+
+        res = minimize(volume, x0, method="Nelder-Mead", options={"maxiter": 4000, "xatol": 1e-5, "fatol": 1e-9})
+        if best is None or res.fun < best.fun:
+            best = res
+    a, b = best.x[:3], best.x[3:]
+    return a, b, float(segment_distances(P, a, b).max())
+
+
+def fit_capsules(P: np.ndarray, k: int, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """``k`` capsules that together contain ``P``: points clustered, one capsule per cluster, then each point
+    reassigned to the capsule it needs the least growth of, and refitted (a few rounds)."""
+    if k == 1:
+        return [fit_capsule(P)]
+    from scipy.cluster.vq import kmeans2
+
+    _, label = kmeans2(P, k, seed=seed, minit="++")
+    caps = [fit_capsule(P[label == j]) for j in range(k) if np.any(label == j)]
+    for _ in range(3):
+        excess = np.stack([segment_distances(P, a, b) - r for a, b, r in caps], axis=1)
+        label = np.argmin(excess, axis=1)
+        caps = [fit_capsule(P[label == j]) for j in range(len(caps)) if np.any(label == j)]
+    return caps
+
+
+def coverage(P: np.ndarray, caps) -> tuple[float, float]:
+    """(largest distance [m] of a point outside every capsule, <= 0 when all inside; mean over the points of the
+    distance from the point to the nearest capsule surface it is inside, i.e. how far the surface is over it)."""
+    excess = np.stack([segment_distances(P, a, b) - r for a, b, r in caps], axis=1).min(axis=1)
+    return float(excess.max()), float(-excess.mean())
+
+
+# Bodies fitted per part: (body name, link, reference sets, capsule count). One capsule per arm link keeps the
+# pair count (and so the distance evaluations of IK, planning and certificates) low; the gripper body and the
+# fingers take two (a single one would over-approximate them by 2-3 cm more).
+def body_spec(side: str) -> list[tuple[str, str, list[str], int]]:
+    s = side.upper()
+    name = "left" if s == "L" else "right"
+    spec = [(f"{name}_link{k}", f"Link-{s}{k}", [f"Link-{s}{k}"], 1) for k in range(1, 7)]
+    spec += [
+        (f"{name}_gripper", f"Link-{s}7", [f"Link-{s}7/gripper"], 2),
+        (f"{name}_wrist_camera", f"Link-{s}7", [f"Link-{s}7/camera"], 1),
+        (f"{name}_fingers", f"Link-{s}7", [f"Link-{s}7/fingers@{o:.1f}" for o in OPENINGS], 2),
+    ]
+    return spec
+
+
+TORSO_REGIONS = (("head", 0.14, None), ("shoulders", -0.10, 0.14), ("torso", None, -0.10))  # z bands [m], root
+
+
+def fit_all(points: dict[str, np.ndarray]) -> tuple[list[tuple[str, str, np.ndarray, np.ndarray, float]], list]:
+    """Capsules (name, link, start, end, radius) in taplan's link frames ("root" for the torso), and the coverage
+    rows (name, points, max outside [m], mean over-approximation [m])."""
+    bodies, rows = [], []
+    for side in ("L", "R"):
+        for name, link, sets, k in body_spec(side):
+            P = np.vstack([points[s] for s in sets]).astype(float)
+            if name.endswith("fingers"):  # one capsule per finger: split the swept points at the gripper's centre
+                centre = np.median(P[:, 2])
+                caps = [fit_capsule(P[P[:, 2] < centre]), fit_capsule(P[P[:, 2] >= centre])]
+            else:
+                caps = fit_capsules(P, k)
+            out, over = coverage(P, caps)
+            rows.append((name, len(P), out, over))
+            for i, (a, b, r) in enumerate(caps):
+                bodies.append((name if len(caps) == 1 else f"{name}_{i}", link, a, b, r))
+    P = points["root/torso"].astype(float)
+    caps = []
+    for region, lo, hi in TORSO_REGIONS:
+        z = P[:, 2]
+        mask = np.ones(len(P), bool) if lo is None else z > lo
+        if hi is not None:
+            mask &= z <= hi
+        a, b, r = fit_capsule(P[mask])
+        caps.append((a, b, r))
+        bodies.append((region, "root", a, b, r))
+    out, over = coverage(P, caps)
+    rows.append(("torso, shoulders, head", len(P), out, over))
+    return bodies, rows
+
+
+def fit_report() -> None:
+    points = dict(np.load(NPZ))
+    bodies, rows = fit_all(points)
+    print("# fitted by models/teleavatar/real_body.py fit (capsules in the link frame [m])")
+    for name, link, a, b, r in bodies:
+        print(
+            f'    ("{name}", "{link}", {tuple(np.round(a, 4).tolist())}, {tuple(np.round(b, 4).tolist())}, '
+            f"{np.ceil(r * 1e4) / 1e4:.4f}),"
+        )
+    print("\n| part | points | max outside [mm] | mean over-approximation [mm] |\n|---|---|---|---|")
+    for name, n, out, over in rows:
+        print(f"| {name} | {n} | {1000 * max(out, 0.0):.1f} | {1000 * over:.1f} |")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) >= 3 and sys.argv[1] == "points":
+        derive(Path(sys.argv[2]))
+    elif len(sys.argv) >= 2 and sys.argv[1] == "fit":
+        fit_report()
+    else:
+        sys.stdout.write(__doc__)
