@@ -46,8 +46,9 @@ __all__ = ["DemoResult", "PlanResult", "Comparison", "run_demo", "READY_POSE"]
 _READY_RIGHT = np.array([-0.6, -0.8, 0.3, -1.4, 0.0, 0.3, 0.0])
 READY_POSE = np.concatenate([0.0 - _READY_RIGHT, _READY_RIGHT])
 
-# The scene plan's goal: the right arm reaching across the box (its right_tcp pose is the target) [rad]
-SCENE_REACH_RIGHT = np.array([-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403])
+# The scene plan's goal: the right arm reaching across the box, the hand above its near edge (its right_tcp pose
+# is the target) [rad]. (The earlier goal, joint 2 at -1.537 rad, put the upper arm into the shoulders' body.)
+SCENE_REACH_RIGHT = np.array([-0.841, -1.177, 1.323, -1.504, -0.348, -0.033, -0.58])
 SCENE_FILE = Path(__file__).resolve().parent / "models" / "teleavatar" / "scenes" / "table.yaml"  # TELEAVATAR_SCENES
 
 COMMAND_RATE = 100.0  # [Hz]: taplan streams at the arm's loop rate (the vendor's own zero.py does too)

@@ -112,6 +112,8 @@ class Robot:
         self.capsules, self.skipped_collision = _load_capsules(self.model, self.urdf_path)
         # body pairs never checked for collision, from an SRDF next to the URDF (None without one)
         self.disabled_pairs: frozenset[frozenset[str]] | None = _load_disabled_pairs(self.urdf_path)
+        # finger bodies per gripper opening, from <urdf stem>.gripper.yaml (None without one)
+        self.gripper_states: dict | None = _load_gripper_states(self.urdf_path)
 
         if limits is None:
             velocity = np.asarray(self.model.velocityLimit, dtype=float)
@@ -354,6 +356,24 @@ def _load_disabled_pairs(urdf_path: Path) -> frozenset[frozenset[str]] | None:
         return read_srdf(srdf)
     except (OSError, ET.ParseError) as exc:
         raise ConfigError(f"{str(srdf)!r}: not a readable SRDF ({exc})") from None
+
+
+def _load_gripper_states(urdf_path: Path) -> dict | None:
+    import yaml
+
+    path = urdf_path.with_suffix(".gripper.yaml")
+    if not path.is_file():
+        return None
+    try:
+        states = yaml.safe_load(path.read_text())
+        for entry in states.values():
+            for state in entry["states"]:
+                lo, hi = (float(v) for v in state["opening"])
+                for c in state["capsules"]:
+                    _ = (np.asarray(c["start"], float), np.asarray(c["end"], float), float(c["radius"]))
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ConfigError(f"{str(path)!r}: not a gripper-state file ({exc})") from None
+    return states
 
 
 def _adjust_pose(path: str | Path) -> np.ndarray:

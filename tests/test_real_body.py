@@ -137,3 +137,60 @@ def test_allowed_pairs_come_from_the_sweep(robot) -> None:
     assert frozenset(("left_fingers_0", "right_fingers_1")) in checked  # the hands can meet
     assert frozenset(("left_link2", "right_link2")) not in checked  # 30 cm apart whatever the joints do
     assert world.min_distance(robot.home)[0] > 0.01  # home is clear by more than a margin
+
+
+def test_gripper_states_contain_the_fingers_over_their_interval(robot, points) -> None:
+    """Each opening interval's finger bodies contain the real fingers at both ends of the interval."""
+    from taplan.scene import robot_bodies
+
+    for lo in (0.0, 0.2, 0.4, 0.6, 0.8):
+        for s in (lo, round(lo + 0.2, 1)):
+            bodies = robot_bodies(robot, gripper=(lo + 0.1))
+            for side, hand in (("L", "left"), ("R", "right")):
+                P = points[f"Link-{side}7/fingers@{s:.1f}"]
+                frame = _link_frame(robot, f"Link-{side}7")
+                local = (frame.rotation @ P.T).T + frame.translation
+                fingers = [(b.start, b.end, b.radius) for b in bodies if b.name.startswith(f"{hand}_fingers")]
+                worst = _excess(local, fingers).max()
+                assert worst <= TOL, f"{hand} fingers at {s}: a point {1000 * worst:.1f} mm outside"
+
+
+def test_known_opening_narrows_the_fingers(robot) -> None:
+    from taplan.errors import InvalidInputError
+    from taplan.scene import Box, Scene, robot_bodies
+
+    def volume(bodies, hand):
+        return sum(
+            np.pi * b.radius**2 * np.linalg.norm(b.end - b.start) + 4 / 3 * np.pi * b.radius**3
+            for b in bodies
+            if b.name.startswith(f"{hand}_fingers")
+        )
+
+    conservative = robot_bodies(robot)
+    assert volume(robot_bodies(robot, gripper="closed"), "left") < 0.5 * volume(conservative, "left")
+    mixed = robot_bodies(robot, gripper={"left": "open", "right": None})
+    assert volume(mixed, "right") == pytest.approx(volume(conservative, "right"))
+    assert volume(mixed, "left") < volume(conservative, "left")
+    # a plate just under the left fingers' closed bodies, inside their whole-range ones: the known opening clears it
+    world = CollisionWorld(robot, Scene(), gripper="closed")
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.home)
+
+    def lowest(bodies):
+        return min(
+            min(data.oMi[b.joint].act(b.start)[2], data.oMi[b.joint].act(b.end)[2]) - b.radius
+            for b in bodies
+            if b.name.startswith("left_fingers")
+        )
+
+    closed_low, range_low = lowest(world.bodies), lowest(conservative)
+    assert range_low < closed_low - 0.01
+    tcp = robot.frame_pose(robot.home, "left_tcp")[:3, 3]
+    world.scene.add("plate", Box((0.04, 0.04, 0.002)), ([tcp[0], tcp[1], closed_low - 0.004], [0, 0, 0, 1]))
+    known = world.min_distance(robot.home)
+    world.set_gripper(None)
+    unknown = world.min_distance(robot.home)
+    assert unknown[0] < 0.0 < known[0] and unknown[1][1] == "plate"
+    for bad in (1.5, "half", {"middle": 0.3}, True):
+        with pytest.raises(InvalidInputError, match="gripper"):
+            robot_bodies(robot, gripper=bad)

@@ -28,6 +28,7 @@ Usage::
 
     python models/teleavatar/real_body.py points RAW_DIR    # -> tests/data/real_body_points.npz, with a report
     python models/teleavatar/real_body.py fit               # capsules fitted to the npz, for make_urdf.py
+    python models/teleavatar/real_body.py gripper > models/teleavatar/teleavatar.gripper.yaml  # per opening
 """
 
 from __future__ import annotations
@@ -396,10 +397,41 @@ def fit_report() -> None:
         print(f"| {name} | {n} | {1000 * max(out, 0.0):.1f} | {1000 * over:.1f} |")
 
 
+GRIPPER_BINS = [(0.0, 0.2), (0.2, 0.4), (0.4, 0.6), (0.6, 0.8), (0.8, 1.0)]  # gripper input (0 closed .. 1 open)
+
+
+def gripper_states(points: dict[str, np.ndarray]) -> str:
+    """The fingers' capsules per opening interval, as the YAML file ``teleavatar.gripper.yaml``: each interval's
+    two capsules contain the finger points at both ends of the interval (the fingers move on 46 mm bars: between
+    two samples 0.2 apart a point leaves their chord by at most 0.3 mm)."""
+    lines = [
+        "# Finger capsules per gripper opening (0 closed .. 1 open, the gripper's input): each replaces the URDF's",
+        "# conservative pair (whole range) when the opening is known. Fitted by models/teleavatar/real_body.py",
+        "# (option gripper) to tests/data/real_body_points.npz; start/end in the link frame [m], radius [m].",
+    ]
+    for side, name in (("L", "left"), ("R", "right")):
+        lines += [f"{name}_fingers:", f"  link: Link-{side}7", f"  bodies: [{name}_fingers_0, {name}_fingers_1]"]
+        lines.append("  states:")
+        for lo, hi in GRIPPER_BINS:
+            P = np.vstack([points[f"Link-{side}7/fingers@{o:.1f}"] for o in (lo, hi)]).astype(float)
+            centre = np.median(P[:, 2])
+            caps = [fit_capsule(P[P[:, 2] < centre]), fit_capsule(P[P[:, 2] >= centre])]
+            lines.append(f"    - opening: [{lo}, {hi}]")
+            lines.append("      capsules:")
+            for a, b, r in caps:
+                lines.append(
+                    f"        - {{start: {np.round(a, 4).tolist()}, end: {np.round(b, 4).tolist()}, "
+                    f"radius: {np.ceil(r * 1e4) / 1e4:.4f}}}"
+                )
+    return "\n".join(lines) + "\n"
+
+
 if __name__ == "__main__":
     if len(sys.argv) >= 3 and sys.argv[1] == "points":
         derive(Path(sys.argv[2]))
     elif len(sys.argv) >= 2 and sys.argv[1] == "fit":
         fit_report()
+    elif len(sys.argv) >= 2 and sys.argv[1] == "gripper":
+        sys.stdout.write(gripper_states(dict(np.load(NPZ))))
     else:
         sys.stdout.write(__doc__)

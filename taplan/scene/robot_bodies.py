@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from taplan.errors import InvalidInputError
 from taplan.scene.capsules import segment_closest_points
 
 __all__ = [
@@ -83,12 +84,60 @@ def _group_of(robot: object, joint: int) -> str:
     return ""
 
 
-def robot_bodies(robot: object) -> list[Body]:
-    """The robot's collision bodies: its URDF capsules, with the arm group that moves each."""
-    return [
+GRIPPER_WORDS = {"closed": 0.0, "open": 1.0}
+
+
+def robot_bodies(robot: object, gripper: object = None) -> list[Body]:
+    """The robot's collision bodies: its URDF capsules, with the arm group that moves each.
+
+    Args:
+        robot: The robot.
+        gripper: The grippers' opening when known (0 closed .. 1 open, the gripper's input): a number or
+            ``"open"`` / ``"closed"`` for both hands, or ``{"left": ..., "right": ...}`` (None: unknown). A known
+            opening replaces the fingers' conservative bodies (the whole opening range) by the ones fitted to the
+            opening interval that contains it (the robot's ``<urdf>.gripper.yaml``); None keeps them.
+    """
+    bodies = [
         Body(c.name, c.joint, np.asarray(c.start), np.asarray(c.end), c.radius, _group_of(robot, c.joint))
         for c in robot.capsules  # type: ignore[attr-defined]
     ]
+    if gripper is None:
+        return bodies
+    states = getattr(robot, "gripper_states", None)
+    if not states:
+        raise InvalidInputError("gripper", gripper, "None: this robot has no gripper states (<urdf>.gripper.yaml)")
+    by_name = {b.name: k for k, b in enumerate(bodies)}
+    model = robot.model  # type: ignore[attr-defined]
+    for hand, opening in _openings(gripper, states).items():
+        entry = states[f"{hand}_fingers"]
+        state = next(s for s in entry["states"] if float(s["opening"][0]) <= opening <= float(s["opening"][1]))
+        frame = model.frames[model.getFrameId(entry["link"])]
+        for name, capsule in zip(entry["bodies"], state["capsules"], strict=True):
+            k = by_name[name]
+            start = frame.placement.act(np.asarray(capsule["start"], float))
+            end = frame.placement.act(np.asarray(capsule["end"], float))
+            source = f"fingers at opening {float(state['opening'][0]):g}-{float(state['opening'][1]):g}"
+            bodies[k] = Body(name, bodies[k].joint, start, end, float(capsule["radius"]), bodies[k].group, source)
+    return bodies
+
+
+def _openings(gripper: object, states: dict) -> dict[str, float]:
+    """``{hand: opening}`` for the hands whose opening is known."""
+    hands = [key.removesuffix("_fingers") for key in states]
+    if isinstance(gripper, dict):
+        unknown = set(gripper) - set(hands)
+        if unknown:
+            raise InvalidInputError("gripper", gripper, f"a mapping with keys from {hands}")
+        items = [(hand, value) for hand, value in gripper.items() if value is not None]
+    else:
+        items = [(hand, gripper) for hand in hands]
+    out = {}
+    for hand, value in items:
+        value = GRIPPER_WORDS.get(value, value) if isinstance(value, str) else value
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= float(value) <= 1.0:
+            raise InvalidInputError("gripper", gripper, "an opening in [0, 1] (0 closed), 'open', 'closed' or None")
+        out[hand] = float(value)
+    return out
 
 
 def _segments(model: pin.Model, data: pin.Data, bodies: list[Body]) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -135,6 +135,8 @@ class CollisionWorld:
         self_collision: Include robot-robot pairs.
         engine: Evaluate batches (:meth:`distances_many`, :meth:`distance_matrix`) with the batched closed-form
             engine (:mod:`taplan.scene.engine`) where the scene allows; False: coal for every obstacle pair.
+        gripper: The grippers' opening when known (0 closed .. 1 open, "open", "closed", per hand as a mapping;
+            None: unknown, the fingers' bodies cover the whole range); see :meth:`set_gripper`.
     """
 
     def __init__(
@@ -145,6 +147,7 @@ class CollisionWorld:
         margin: float = 0.0,
         self_collision: bool = True,
         engine: bool = True,
+        gripper: object = None,
     ):
         import coal
 
@@ -160,7 +163,26 @@ class CollisionWorld:
         self.margin = float(margin)
         self.model = robot.model
         self.data = robot.model.createData()
-        self.bodies: list[Body] = robot_bodies(robot)
+        self._self_collision = self_collision
+        self._use_bodies(robot_bodies(robot, gripper))
+        self._version = -1
+        self._items: list[_Item] = []
+        self._request = coal.DistanceRequest()
+        self._request.enable_signed_distance = True
+        self.use_engine = bool(engine)
+        self._engine: Any = None
+
+    def set_gripper(self, gripper: object) -> None:
+        """Use the fingers' bodies for a known gripper opening (see :func:`~taplan.scene.robot_bodies`), or None for
+        the conservative ones; e.g. from the measured gripper position before each plan or stream segment."""
+        self._use_bodies(robot_bodies(self.robot, gripper))
+        self._version = -1  # attached objects' touch sets and reach follow the bodies
+        self._engine = None  # the batched engine holds the bodies: rebuilt on its next use
+
+    def _use_bodies(self, bodies: list[Body]) -> None:
+        coal = self._coal
+        robot, self_collision = self.robot, self._self_collision
+        self.bodies: list[Body] = bodies
         self.allowed = allowed_pairs(robot, self.bodies)
         self.self_pairs = [
             (i, j)
@@ -193,12 +215,6 @@ class CollisionWorld:
             geometry = coal.Capsule(b.radius, length) if length > 1e-9 else coal.Sphere(b.radius)
             self._body_geometry.append((geometry, _segment_frame(b.start, b.end)))
         self.reach = self._reach()
-        self._version = -1
-        self._items: list[_Item] = []
-        self._request = coal.DistanceRequest()
-        self._request.enable_signed_distance = True
-        self.use_engine = bool(engine)
-        self._engine: Any = None
 
     # ----------------------------------------------------------------------------------------------- helpers
     def _chain_reach(self, joint: int, extent: float) -> np.ndarray:
