@@ -5,6 +5,9 @@ Measured on the bundled TeleAvatar and table scene (``models/teleavatar/scenes/t
 * ``distances``: ``CollisionWorld.distances(q)`` with Jacobians (every pair: self and scene) at 200 random clear
   configurations; queries per second = 1 / median;
 * ``min_distance``: ``CollisionWorld.min_distance(q)`` (no Jacobians), same configurations;
+* ``planning``: ``plan_motion`` (5 s budget) on the seeded problems of ``benchmarks/_scenes.py`` (every family in
+  turn; the problems are drawn clear for the bodies under test, so each version plans its own set): success and
+  time per family;
 * ``ik step``: ``DifferentialIK.step`` with the scene (``SceneLimit``) and the arm-arm ``CollisionLimit``, both
   hands moving to targets 10 cm below their home poses: 3 x 300 consecutive steps (dt 0.01 s) from home.
 
@@ -80,11 +83,38 @@ def measure() -> dict[str, dict[str, float]]:
     return out
 
 
+def planning(count: int) -> dict[str, dict[str, float]]:
+    from benchmarks._scenes import problems
+    from taplan.planning import plan_motion
+
+    robot = taplan.Robot.teleavatar()
+    out: dict[str, dict[str, float]] = {}
+    for problem in problems(count, seed=0):
+        row = out.setdefault(problem.family, {"problems": 0.0, "solved": 0.0, "seconds": 0.0})
+        t0 = time.perf_counter()
+        try:
+            plan_motion(robot, problem.start, problem.goal, problem.scene, max_time=5.0)
+            row["solved"] += 1
+        except taplan.errors.TaplanError:
+            pass
+        row["seconds"] += time.perf_counter() - t0
+        row["problems"] += 1
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-save", action="store_true")
+    parser.add_argument("--planning", type=int, default=20, help="planning problems (0: none)")
     args = parser.parse_args()
     results = measure()
+    if args.planning:
+        results["planning"] = planning(args.planning)
+        for family, row in results["planning"].items():
+            print(
+                f"planning {family:10s} {int(row['solved'])}/{int(row['problems'])} solved, "
+                f"mean {row['seconds'] / row['problems']:.2f} s"
+            )
     rows = [
         ("distances (with Jacobians)", results["distances"], 1e6 / results["distances"]["median_us"]),
         ("min_distance", results["min_distance"], 1e6 / results["min_distance"]["median_us"]),
@@ -106,6 +136,14 @@ def main() -> None:
             f"{int(b['count'])} bodies, {int(b['self_pairs'])} self pairs checked. `python -m benchmarks.bench_bodies`"
             "\n\n" + table
         )
+        if "planning" in results:
+            text += "\n\n" + _harness.markdown_table(
+                ["family", "solved", "mean time [s]"],
+                [
+                    [f, f"{int(r['solved'])}/{int(r['problems'])}", f"{r['seconds'] / r['problems']:.2f}"]
+                    for f, r in results["planning"].items()
+                ],
+            )
         _harness.save("bodies", results, text)
 
 

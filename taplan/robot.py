@@ -22,7 +22,7 @@ from taplan._validation import as_matrix, as_vector
 from taplan.errors import ConfigError, InvalidInputError, UnknownNameError
 from taplan.io.native import native_stderr
 from taplan.limits import DEFAULT_PLANNING_SCALING, JointLimits
-from taplan.scene.capsules import Capsule, capsules_from_urdf
+from taplan.scene.capsules import Capsule, capsules_from_urdf, read_srdf
 
 __all__ = [
     "Robot",
@@ -347,8 +347,6 @@ def _load_capsules(model: pin.Model, urdf_path: Path) -> tuple[list[Capsule], li
 
 
 def _load_disabled_pairs(urdf_path: Path) -> frozenset[frozenset[str]] | None:
-    from taplan.scene.robot_bodies import read_srdf
-
     srdf = urdf_path.with_suffix(".srdf")
     if not srdf.is_file():
         return None

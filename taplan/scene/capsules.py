@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["Capsule", "capsules_from_urdf", "segment_closest_points", "capsule_distance"]
+__all__ = ["Capsule", "capsules_from_urdf", "segment_closest_points", "capsule_distance", "read_srdf"]
 
 
 @dataclass(frozen=True)
@@ -126,3 +126,11 @@ def capsule_distance(data: pin.Data, first: Capsule, second: Capsule) -> float:
     b0, b1 = second.world_segment(data)
     pa, pb, _, _ = segment_closest_points(a0, a1, b0, b1)
     return float(np.linalg.norm(pa - pb)) - first.radius - second.radius
+
+
+def read_srdf(path: str | Path) -> frozenset[frozenset[str]]:
+    """The ``disable_collisions`` pairs of an SRDF file."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(str(path)).getroot()
+    return frozenset(frozenset((e.get("link1", ""), e.get("link2", ""))) for e in root.iter("disable_collisions"))

@@ -31,7 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from taplan.errors import InvalidInputError
-from taplan.scene.capsules import segment_closest_points
+from taplan.scene.capsules import read_srdf, segment_closest_points
 
 __all__ = [
     "Body",
@@ -258,9 +258,3 @@ def write_srdf(path: str | Path, robot_name: str, allowed: dict[frozenset[str], 
     ET.indent(root, space="  ")
     text = '<?xml version="1.0"?>\n' + (f"<!-- {header} -->\n" if header else "")
     Path(path).write_text(text + ET.tostring(root, encoding="unicode") + "\n")
-
-
-def read_srdf(path: str | Path) -> frozenset[frozenset[str]]:
-    """The ``disable_collisions`` pairs of an SRDF file."""
-    root = ET.parse(str(path)).getroot()
-    return frozenset(frozenset((e.get("link1", ""), e.get("link2", ""))) for e in root.iter("disable_collisions"))
