@@ -698,7 +698,10 @@ class CollisionWorld:
         """
         coarse = self.distances(q, jacobian=False, bound_beyond=-math.inf)
         bounded = {self._items[k].name for k in self._solid_index} | {o.name for o in self._fields}
-        exact = [d for (_, b), d in zip(coarse.pairs, coarse.distance, strict=True) if b not in bounded]
+        bounded |= {a.name for a in self._attached_items()}  # attached objects report bounds beyond it too
+        exact = [
+            d for (a, b), d in zip(coarse.pairs, coarse.distance, strict=True) if a not in bounded and b not in bounded
+        ]
         best = min(exact, default=math.inf)
         if len(coarse.distance) and float(np.min(coarse.distance)) < best:
             return self.distances(q, jacobian=False, bound_beyond=best).closest()
