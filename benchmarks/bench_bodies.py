@@ -102,11 +102,14 @@ def planning(count: int) -> dict[str, dict[str, float]]:
     return out
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-save", action="store_true")
+    parser.add_argument("--quick", action="store_true", help="10 planning problems")
     parser.add_argument("--planning", type=int, default=20, help="planning problems (0: none)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.planning = min(args.planning, 10)
     results = measure()
     if args.planning:
         results["planning"] = planning(args.planning)
