@@ -76,10 +76,14 @@ def start_sim(tmp_path: Path) -> Iterator:
 
 
 def _plan(robot: taplan.Robot, start: np.ndarray, offset: float, legs: int = 1) -> taplan.Trajectory:
-    """From ``start`` to ``start`` ± ``offset`` (left +, right -) and back, ``legs`` straight legs."""
+    """From ``start`` to ``start`` ∓ ``offset`` (left -, right +) and back, ``legs`` straight legs.
+
+    The arms mirror each other, away from the body: from home, -0.8 rad on the right would turn its upper arm into
+    the shoulders' body (joint 2 toward its limit).
+    """
     goal = start.copy()
-    goal[:7] += offset
-    goal[7:] -= offset
+    goal[:7] -= offset
+    goal[7:] += offset
     limits = robot.planning_limits
     goal = np.clip(goal, limits.lower + 0.3, limits.upper - 0.3)  # room for the spline's bulge between legs
     waypoints = [start] + [goal if k % 2 == 0 else start for k in range(legs)]

@@ -24,9 +24,9 @@ import pinocchio as pin
 # body's surface (the TeleAvatar 2.0's published convex collision pieces, placed by its kinematics) by
 # ``models/teleavatar/real_body.py fit``: every reference point of tests/data/real_body_points.npz is inside (the
 # coverage table is in docs/robot.md). One capsule per arm link, two for the gripper body, one for the wrist
-# camera, one per finger over the whole opening range; the torso as head, shoulders and torso. Cylinders in the
-# file stand for capsules of the same radius around the same segment (caps included), which is how taplan reads
-# them.
+# camera, one per finger over the whole opening range; the torso as head, shoulders and torso; the lift column (an
+# estimate). Cylinders in the file stand for capsules of the same radius around the same segment (caps included),
+# which is how taplan reads them.
 CAPSULES = [
     ("left_link1", "Link-L1", (-0.0016, 0.005, 0.0222), (0.0025, -0.019, -0.1287), 0.0730),
     ("left_link2", "Link-L2", (0.1002, -0.0011, 0.015), (-0.0061, 0.0043, -0.0001), 0.0501),
@@ -53,6 +53,9 @@ CAPSULES = [
     ("head", "root", (-0.0012, 0.0455, 0.1976), (-0.0044, -0.0346, 0.186), 0.1356),
     ("shoulders", "root", (-0.0214, 0.0278, 0.0263), (-0.0147, -0.0302, 0.021), 0.1794),
     ("torso", "root", (-0.0346, -0.0064, -0.1577), (-0.0278, 0.0063, -0.1641), 0.1636),
+    # The lift column below the torso (the real body's reference set has no piece of it): an estimate, the earlier
+    # model's torso cylinder, r 7 cm from 8 cm to 45 cm below the shoulders.
+    ("column", "root", (0.0, 0.0, -0.08), (0.0, 0.0, -0.45), 0.07),
 ]
 
 # Named frames: (name, parent link, xyz [m], rpy [rad]).
