@@ -392,7 +392,7 @@ def test_scene_file_without_frame_is_in_the_root_frame(robot) -> None:
                     }
                 ]
             },
-            r"unknown touch body .*'Link-NOPE'; valid: .*Link-L7_0",
+            r"unknown touch body .*'Link-NOPE'; valid: .*left_gripper_0",
         ),
         (
             {
@@ -433,7 +433,7 @@ def test_attach_checks_frame_and_touch_once_bound(robot) -> None:
         scene.attach("cup", Sphere(0.04), "nope")
     with pytest.raises(UnknownNameError, match="'Link-NOPE'"):
         scene.attach("cup", Sphere(0.04), "left_tcp", touch=("Link-NOPE",))
-    assert scene.attach("cup", Sphere(0.04), "left_tcp", touch=("Link-L7_0",)).frame == "left_tcp"
+    assert scene.attach("cup", Sphere(0.04), "left_tcp", touch=("left_gripper_0",)).frame == "left_tcp"
     loose = Scene()  # no robot yet: checked when a world binds it
     loose.attach("cup", Sphere(0.04), "nope")
     with pytest.raises(UnknownNameError, match="'nope'"):

@@ -13,7 +13,7 @@ Schema (``models/teleavatar/scenes/table.yaml`` is an example; docs/scene.md is 
         shape: {type: cylinder, radius: 0.04, length: 0.1}
         frame: left_tcp
         pose: {xyz: [0, 0, 0.08], xyzw: [0, 0, 0, 1]}
-        touch: [Link-L7_0]        # optional: robot bodies it may touch
+        touch: [left_gripper_0]    # optional: robot bodies it may touch
 
 Obstacles are stored in the root frame: ``T_root_obstacle = T_root_frame(q) @ T_frame_obstacle``, with ``q`` the
 robot's home configuration updated by ``configuration`` (a frame on an arm moves with it; the file's obstacles do
