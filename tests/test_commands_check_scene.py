@@ -16,7 +16,9 @@ from taplan.planning import scene_clearance
 from taplan.scene import CollisionWorld, load_scene
 
 SCENE = Path(__file__).resolve().parents[1] / "models" / "teleavatar" / "scenes" / "table.yaml"
-ACROSS_THE_BOX = [-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403]  # right arm, docs/planning.md [rad]
+# the right arm across the box [rad]: joint 2 at -1.537 (the docs' old pose) put the upper arm into the shoulders'
+# body; at -1.42 it is 11 mm clear of it, and the straight plan still cuts 49 mm into the box
+ACROSS_THE_BOX = [-0.694, -1.42, 1.399, -1.306, -0.263, -0.369, -0.403]
 SAMPLE_TOL = 1e-9  # [m]: the reported minimum is one of the evaluated distances, none of the samples is lower
 
 
@@ -45,7 +47,7 @@ def test_scene_clearance_finds_the_deepest_instant(robot, world) -> None:
     )
     trajectory = straight.trajectory
     result = scene_clearance(world, trajectory)
-    assert not result.passed and result.min_clearance < -0.05 and result.pair[1] == "box"
+    assert not result.passed and result.min_clearance < -0.04 and result.pair[1] == "box"
     times = np.linspace(trajectory.times[0], trajectory.times[-1], 801)  # independent, 8x denser than its samples
     q = np.repeat(robot.home[None], len(times), axis=0)
     q[:, 7:] = trajectory(times)
@@ -66,9 +68,9 @@ def test_check_scene_fails_a_plan_through_the_box_and_passes_the_scene_plan(tmp_
     report = tmp_path / "report.json"
     assert main(["check", str(blind), "--no-png", "--scene", str(SCENE), "--json", str(report)]) == 1
     out = capsys.readouterr().out
-    assert "scene clearance: FAIL" in out and "mm inside (Link-R" in out and "/ box at t = " in out
+    assert "scene clearance: FAIL" in out and "mm inside (right_" in out and "/ box at t = " in out
     data = json.loads(report.read_text())["scene"]
-    assert data["passed"] is False and data["min_clearance"] < -0.05 and data["pair"][1] == "box"
+    assert data["passed"] is False and data["min_clearance"] < -0.04 and data["pair"][1] == "box"
 
     assert main(["plan", str(waypoints), "--scene", str(SCENE), "-o", str(planned)]) == 0
     assert "1 leg -> " in capsys.readouterr().out

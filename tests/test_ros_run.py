@@ -358,8 +358,8 @@ def test_cli_messages_tell_what_happened(robot, start_sim, tmp_path: Path) -> No
     assert done.returncode == 0, done.stdout + done.stderr
     assert "completed: held the position for 0.5 s" in done.stdout and "plan finished" not in done.stdout
 
-    blind = tmp_path / "blind.json"  # home -> across the table's box, planned without the scene: 100 mm into it
-    across = np.array([-0.694, -1.537, 1.399, -1.306, -0.263, -0.369, -0.403])
+    blind = tmp_path / "blind.json"  # home -> across the table's box, planned without the scene: 49 mm into it
+    across = np.array([-0.694, -1.42, 1.399, -1.306, -0.263, -0.369, -0.403])
     right = robot.planning_limits.subset(robot.joint_names[7:])
     jerk_limited(np.array([robot.home[7:], across]), right).trajectory.save(blind)
     scene = Path(__file__).resolve().parents[1] / "models" / "teleavatar" / "scenes" / "table.yaml"
