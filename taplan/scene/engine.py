@@ -174,7 +174,7 @@ class DistanceEngine:
         N, S = len(E), len(i)
         a0, a1 = E[:, i, 0].reshape(-1, 3), E[:, i, 1].reshape(-1, 3)
         b0, b1 = E[:, j, 0].reshape(-1, 3), E[:, j, 1].reshape(-1, 3)
-        s, t = _segment_parameters(a0, a1, b0, b1)
+        s, t = segment_parameters(a0, a1, b0, b1)
         pa, pb = a0 + s[:, None] * (a1 - a0), b0 + t[:, None] * (b1 - b0)
         delta = pa - pb
         norm = np.linalg.norm(delta, axis=1)
@@ -361,8 +361,9 @@ def _point_segment(point: np.ndarray, e0: np.ndarray, e1: np.ndarray) -> np.ndar
     return np.clip(np.where(length2 < _TINY, 0.0, t), 0.0, 1.0)
 
 
-def _segment_parameters(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Parameters (s, t) of the closest points of segment pairs (the world's closed form, Ericson 5.1.9)."""
+def segment_parameters(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Parameters (s, t) in [0, 1] of the closest points of segment pairs [p0, p1], [q0, q1] (each (m, 3)),
+    vectorised, zero-length segments too (Ericson, Real-Time Collision Detection, 5.1.9)."""
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
     a = np.einsum("ij,ij->i", d1, d1)
     e = np.einsum("ij,ij->i", d2, d2)
@@ -465,7 +466,7 @@ def _segment_capsule(e0: np.ndarray, e1: np.ndarray, size: np.ndarray) -> tuple[
     """Segments against the z-axis core segments of half length ``size[:, 2]`` (capsules; spheres have 0)."""
     top = np.zeros_like(e0)
     top[:, 2] = size[:, 2]
-    s, t = _segment_parameters(e0, e1, -top, top)
+    s, t = segment_parameters(e0, e1, -top, top)
     return s, -top + t[:, None] * 2 * top
 
 

@@ -23,6 +23,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan.errors import CollisionError, InvalidInputError
+from taplan.scene.engine import segment_parameters
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import Scene
 from taplan.scene.shapes import Box, HalfSpace
@@ -749,23 +750,5 @@ def _segment_frame(start: np.ndarray, end: np.ndarray) -> np.ndarray:
 
 def _closest_points(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closest points of segment pairs [p0, p1], [q0, q1] (each (m, 3)), vectorised (zero-length segments too)."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a = np.einsum("ij,ij->i", d1, d1)
-    e = np.einsum("ij,ij->i", d2, d2)
-    f = np.einsum("ij,ij->i", d2, r)
-    c = np.einsum("ij,ij->i", d1, r)
-    b = np.einsum("ij,ij->i", d1, d2)
-    eps = 1e-12
-    safe_a, safe_e = np.maximum(a, eps), np.maximum(e, eps)
-    denom = a * e - b * b
-    s = np.where(denom > eps, np.clip((b * f - c * e) / np.maximum(denom, eps), 0.0, 1.0), 0.0)
-    s = np.where(a <= eps, 0.0, s)
-    t = np.where(e <= eps, 0.0, (b * s + f) / safe_e)
-    low, high = t < 0.0, t > 1.0
-    s = np.where(low & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
-    s = np.where(high & (a > eps), np.clip((b - c) / safe_a, 0.0, 1.0), s)
-    t = np.clip(t, 0.0, 1.0)
-    # a point-like first segment: t from the projection of p0 on the second
-    t = np.where(a <= eps, np.where(e <= eps, 0.0, np.clip(f / safe_e, 0.0, 1.0)), t)
-    s = np.where((e <= eps) & (a > eps), np.clip(-c / safe_a, 0.0, 1.0), s)
-    return p0 + s[:, None] * d1, q0 + t[:, None] * d2
+    s, t = segment_parameters(p0, p1, q0, q1)
+    return p0 + s[:, None] * (p1 - p0), q0 + t[:, None] * (q1 - q0)
