@@ -82,3 +82,41 @@ def test_hardware_limits_never_plan_slower_than_the_planning_limits(tmp_path: Pa
     hardware = taplan.Trajectory.load(tmp_path / "hardware.json")
     world = CollisionWorld(robot, load_scene(SCENE))
     assert verify_trajectory(world, hardware, floor=0.0).collision_free
+
+
+def test_a_timing_fallback_is_reported_in_the_plan_and_on_the_command_line(tmp_path: Path, capsys, monkeypatch) -> None:
+    """Issue 23: whenever a plan falls back to a slower timing, the report and the CLI say so. On the real body no
+    goal we tried makes the fastest timing cut the box, so the fastest timing's certificate is made to fail here (the
+    first verification of the timed path: an independent refusal, as a too-close corner would be)."""
+    import dataclasses
+
+    import taplan.planning.motion as motion
+
+    real = motion.verify_trajectory
+    refused: list[float] = []
+
+    def refuse_the_first_timing(world, trajectory, **options):  # noqa: ANN001, ANN202 (a stand-in)
+        check = real(world, trajectory, **options)
+        if not refused and options.get("floor", 0.0) < 0.01:  # the timed path's certificate (floor = margin / 4)
+            refused.append(trajectory.duration)
+            return dataclasses.replace(check, collision_free=False, min_clearance=0.001, pair=("right_link6", "box"))
+        return check
+
+    monkeypatch.setattr(motion, "verify_trajectory", refuse_the_first_timing)
+    monkeypatch.setattr(motion, "_on_certified_segment", lambda *args: False)  # the straight certificate is not reused
+    robot = taplan.Robot.teleavatar()
+    rows = [robot.home[7:], np.array([-0.694, -1.42, 1.399, -1.306, -0.263, -0.369, -0.403])]  # across the box
+    path = tmp_path / "waypoints.csv"
+    np.savetxt(path, np.array(rows), delimiter=",", header=",".join(robot.joint_names[7:]), comments="")
+    out = tmp_path / "plan.json"
+    assert main(["plan", str(path), "--scene", str(SCENE), "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert refused, "the fastest timing was never verified"
+    assert "timing fell back to" in printed and f"the fastest timing, {refused[0]:.3f} s" in printed
+    assert taplan.Trajectory.load(out).duration >= refused[0] - 1e-9  # [s] the fallback is no faster than the refused
+
+    world = CollisionWorld(robot, load_scene(SCENE))
+    refused.clear()
+    plan = taplan.planning.plan_motion(robot, robot.home, np.concatenate([robot.home[:7], rows[1]]), world=world)
+    assert plan.report.timing_fallback.startswith("timing fell back to")
+    assert plan.report.timing_fallback in plan.report.notes
