@@ -1,5 +1,7 @@
 """Where plan_motion's time goes: cProfile over problems of ``benchmarks/_scenes.py``, with the per-stage sums of
-``PlanReport.stage_times`` and the functions with the most cumulative and own time.
+``PlanReport.stage_times`` (wall) beside the CPU time of each stage's functions (the profiler runs on
+``time.process_time``: the machine is shared, CPU time is what the planner itself spent) and the functions with the
+most cumulative and own CPU time.
 
 Run: ``python -m benchmarks.profile_planning [--problems 26] [--seed 0] [--top 30]``.
 """
@@ -20,6 +22,29 @@ from taplan.planning import plan_motion
 from taplan.scene import CollisionWorld
 
 MAX_TIME = 5.0  # [s] the benchmark's budget
+# the functions whose cumulative CPU time is a stage's (wall: PlanReport.stage_times)
+STAGE_FUNCTIONS = {
+    "goal_ik": ("motion.py", "_goal_ik"),
+    "straight": ("verify.py", "check_segment"),
+    "optimize+smooth": ("optimize.py", "optimize_path"),
+    "sample": ("rrt.py", "rrt_connect_shrinking"),
+    "timing (jerk_limited)": ("jerk_limited.py", "jerk_limited"),
+    "timing (straight_line)": ("straight.py", "straight_line"),
+    "verify": ("verify.py", "verify_trajectory"),
+    "time_and_verify": ("motion.py", "_time_and_verify"),
+}
+
+
+def _stage_cpu(stats: pstats.Stats) -> dict[str, tuple[int, float]]:
+    """Calls and cumulative CPU seconds of each stage's function (recursion counted once)."""
+    out = {}
+    for stage, (module, name) in STAGE_FUNCTIONS.items():
+        calls, seconds = 0, 0.0
+        for (path, _line, function), (_cc, nc, _tt, ct, _callers) in stats.stats.items():  # type: ignore[attr-defined]
+            if function == name and path.endswith(module):
+                calls, seconds = calls + nc, seconds + ct
+        out[stage] = (calls, seconds)
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,11 +56,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("toppra").setLevel(logging.ERROR)
     robot = taplan.Robot.teleavatar()
     suite = problems(args.problems, args.seed)
-    profile = cProfile.Profile()
-    seconds, totals = [], {}
+    profile = cProfile.Profile(time.process_time)
+    seconds, cpu, totals = [], [], {}
     for problem in suite:
         world = CollisionWorld(robot, problem.scene)
-        begin = time.perf_counter()
+        begin, begin_cpu = time.perf_counter(), time.process_time()
         profile.enable()
         try:
             plan = plan_motion(robot, problem.start, problem.goal, world=world, max_time=MAX_TIME, seed=problem.index)
@@ -44,14 +69,22 @@ def main(argv: list[str] | None = None) -> int:
             stage, stage_times = f"failed ({str(exc)[:60]})", {}
         profile.disable()
         seconds.append(time.perf_counter() - begin)
+        cpu.append(time.process_time() - begin_cpu)
         for key, value in stage_times.items():
             totals[key] = totals.get(key, 0.0) + value
         spent = " ".join(f"{k}={v * 1e3:.0f}" for k, v in stage_times.items() if v > 5e-4)
         ms = seconds[-1] * 1e3
-        print(f"{problem.index:3d} {problem.family:10s} {problem.kind:5s} {ms:8.1f} ms  {stage}  {spent}")
-    print(f"median {np.median(seconds) * 1e3:.1f} ms, p95 {np.percentile(seconds, 95) * 1e3:.1f} ms")
-    print("stage sums [s]:", {k: round(v, 3) for k, v in totals.items()}, "calls:", round(sum(seconds), 3))
+        cpu_ms = cpu[-1] * 1e3
+        head = f"{problem.index:3d} {problem.family:10s} {problem.kind:5s}"
+        print(f"{head} {ms:8.1f} ms ({cpu_ms:6.1f} CPU) {stage}  {spent}")
+    for what, values in (("wall", seconds), ("CPU", cpu)):
+        median, p95 = np.median(values) * 1e3, np.percentile(values, 95) * 1e3
+        print(f"{what}: median {median:.1f} ms, p95 {p95:.1f} ms, sum {sum(values):.3f} s")
+    print("stage sums, wall [s]:", {k: round(v, 3) for k, v in totals.items()})
     stats = pstats.Stats(profile)
+    print("stage CPU [s] (calls):")
+    for stage, (calls, spent_cpu) in _stage_cpu(stats).items():
+        print(f"  {stage:24s} {spent_cpu:8.3f} ({calls})")
     stats.sort_stats("cumulative").print_stats(args.top)
     stats.sort_stats("tottime").print_stats(args.top)
     return 0
