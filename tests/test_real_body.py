@@ -2,7 +2,8 @@
 
 Reference: ``tests/data/real_body_points.npz``, surface points of the TeleAvatar 2.0's published convex collision
 pieces (vertices and points sampled on each piece's hull) in taplan's link frames, derived by
-``models/teleavatar/real_body.py`` (source and coverage limits in its docstring). Fingers at six gripper openings.
+``models/teleavatar/real_body.py`` (source and coverage limits in its docstring; ``real_body.py coverage`` prints
+the coverage table per part). Fingers and finger linkage at six gripper openings.
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ def robot() -> taplan.Robot:
 
 @pytest.fixture(scope="module")
 def points() -> dict[str, np.ndarray]:
-    return {k: v.astype(float) for k, v in np.load(POINTS).items()}
+    with np.load(POINTS) as data:
+        return {k: data[k].astype(float) for k in data.files if k != "source"}
 
 
 def _excess(P: np.ndarray, segments: list[tuple[np.ndarray, np.ndarray, float]]) -> np.ndarray:
@@ -62,9 +64,14 @@ def test_reference_set_covers_every_part(points) -> None:
     parts = {k.split("@")[0] for k in points}
     for side in "LR":
         assert {f"Link-{side}{k}" for k in range(1, 7)} <= parts
-        assert {f"Link-{side}7/gripper", f"Link-{side}7/camera", f"Link-{side}7/fingers"} <= parts
-    assert "root/torso" in parts
-    assert sum(len(v) for v in points.values()) > 10000
+        assert {f"Link-{side}7/{part}" for part in ("gripper", "camera", "fingers", "linkage")} <= parts
+        for part in ("fingers", "linkage"):  # over the whole opening range, closed to open
+            assert {f"Link-{side}7/{part}@{o}" for o in ("0.0", "0.2", "0.4", "0.6", "0.8", "1.0")} <= set(points)
+    assert {"root/torso", "root/head_camera", "root/carriage"} <= parts
+    assert sum(len(v) for v in points.values()) > 40000
+    with np.load(POINTS) as data:  # the set says where it comes from
+        source = str(data["source"])
+    assert "Matisse06/AgenticTeleAvatar2.0" in source and "@275c432" in source and "@98399bd" in source
 
 
 def test_every_reference_point_is_inside_the_bodies_of_its_link(robot, points) -> None:
@@ -147,12 +154,22 @@ def test_gripper_states_contain_the_fingers_over_their_interval(robot, points) -
         for s in (lo, round(lo + 0.2, 1)):
             bodies = robot_bodies(robot, gripper=(lo + 0.1))
             for side, hand in (("L", "left"), ("R", "right")):
-                P = points[f"Link-{side}7/fingers@{s:.1f}"]
                 frame = _link_frame(robot, f"Link-{side}7")
+                P = points[f"Link-{side}7/fingers@{s:.1f}"]
                 local = (frame.rotation @ P.T).T + frame.translation
                 fingers = [(b.start, b.end, b.radius) for b in bodies if b.name.startswith(f"{hand}_fingers")]
                 worst = _excess(local, fingers).max()
                 assert worst <= TOL, f"{hand} fingers at {s}: a point {1000 * worst:.1f} mm outside"
+                # the finger linkage (carriers, drive links, crank, parallel bars) inside the hand's bodies
+                P = points[f"Link-{side}7/linkage@{s:.1f}"]
+                local = (frame.rotation @ P.T).T + frame.translation
+                hand_bodies = [(b.start, b.end, b.radius) for b in bodies if b.joint == frame_joint(robot, side)]
+                worst = _excess(local, hand_bodies).max()
+                assert worst <= TOL, f"{hand} linkage at {s}: a point {1000 * worst:.1f} mm outside"
+
+
+def frame_joint(robot: taplan.Robot, side: str) -> int:
+    return robot.model.frames[robot.model.getFrameId(f"Link-{side}7")].parentJoint
 
 
 def test_known_opening_narrows_the_fingers(robot) -> None:
@@ -171,7 +188,9 @@ def test_known_opening_narrows_the_fingers(robot) -> None:
     mixed = robot_bodies(robot, gripper={"left": "open", "right": None})
     assert volume(mixed, "right") == pytest.approx(volume(conservative, "right"))
     assert volume(mixed, "left") < volume(conservative, "left")
-    # a plate just under the left fingers' closed bodies, inside their whole-range ones: the known opening clears it
+    # a plate just under the left fingers' closed bodies, inside their whole-range ones: the known opening clears it.
+    # It sits under the finger tips (2.5 cm beyond the grasp point along the fingers, clear of the gripper body's
+    # capsule over the finger linkage), lowered until it is 3 mm under the bodies of the known opening.
     world = CollisionWorld(robot, Scene(), gripper="closed")
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, robot.home)
@@ -185,8 +204,15 @@ def test_known_opening_narrows_the_fingers(robot) -> None:
 
     closed_low, range_low = lowest(world.bodies), lowest(conservative)
     assert range_low < closed_low - 0.01
-    tcp = robot.frame_pose(robot.home, "left_tcp")[:3, 3]
-    world.scene.add("plate", Box((0.04, 0.04, 0.002)), ([tcp[0], tcp[1], closed_low - 0.004], [0, 0, 0, 1]))
+    pose = robot.frame_pose(robot.home, "left_tcp")
+    tips = pose[:3, 3] + 0.025 * pose[:3, 1]  # the tcp frame has Link-7's axes: the fingers point along its y
+    world.scene.add("plate", Box((0.03, 0.03, 0.002)), ([tips[0], tips[1], tips[2] - 0.2], [0, 0, 0, 1]))
+    low, high = tips[2] - 0.2, tips[2]
+    for _ in range(30):  # bisection on the plate's height: the highest with 3 mm of clearance
+        mid = 0.5 * (low + high)
+        world.scene.move("plate", ([tips[0], tips[1], mid], [0, 0, 0, 1]))
+        low, high = (mid, high) if world.min_distance(robot.home)[0] > 0.003 else (low, mid)
+    world.scene.move("plate", ([tips[0], tips[1], low], [0, 0, 0, 1]))
     known = world.min_distance(robot.home)
     world.set_gripper(None)
     unknown = world.min_distance(robot.home)

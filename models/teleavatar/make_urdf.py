@@ -23,36 +23,39 @@ import pinocchio as pin
 # ("root": taplan's root frame shoulder_base, x forward, y left, z up; written on base_link). Fitted to the real
 # body's surface (the TeleAvatar 2.0's published convex collision pieces, placed by its kinematics) by
 # ``models/teleavatar/real_body.py fit``: every reference point of tests/data/real_body_points.npz is inside (the
-# coverage table is in docs/robot.md). One capsule per arm link, two for the gripper body, one for the wrist
-# camera, one per finger over the whole opening range; the torso as head, shoulders and torso; the lift column (an
-# estimate). Cylinders in the file stand for capsules of the same radius around the same segment (caps included),
-# which is how taplan reads them.
+# coverage table is in docs/robot.md; ``real_body.py coverage`` recomputes it). One capsule per arm link, two for
+# the gripper body with its finger linkage, one for the wrist camera, one per finger over the whole opening range;
+# the torso as head, shoulders and torso, the lift carriage behind it; the lift column (an estimate). Cylinders
+# in the file stand for capsules of the same radius around the same segment (caps included), which is how taplan
+# reads them.
 CAPSULES = [
     ("left_link1", "Link-L1", (-0.0016, 0.005, 0.0222), (0.0025, -0.019, -0.1287), 0.0730),
-    ("left_link2", "Link-L2", (0.1002, -0.0011, 0.015), (-0.0061, 0.0043, -0.0001), 0.0501),
+    ("left_link2", "Link-L2", (0.09, -0.0009, 0.028), (-0.0014, 0.0055, -0.0137), 0.0614),
     ("left_link3", "Link-L3", (0.0002, 0.0005, -0.0227), (0.0202, -0.0184, -0.1385), 0.0723),
-    ("left_link4", "Link-L4", (0.0761, -0.0371, 0.0034), (0.0794, -0.0061, 0.0198), 0.0449),
+    ("left_link4", "Link-L4", (0.0759, -0.0306, 0.0045), (0.0141, -0.0061, -0.0021), 0.0496),
     ("left_link5", "Link-L5", (-0.0009, -0.0011, -0.0156), (-0.0097, -0.0023, -0.15), 0.0609),
     ("left_link6", "Link-L6", (0.0023, -0.0068, -0.0138), (0.0008, -0.0037, -0.0416), 0.0428),
-    ("left_gripper_0", "Link-L7", (0.0018, 0.0817, -0.0293), (-0.0211, 0.0983, -0.0397), 0.0383),
-    ("left_gripper_1", "Link-L7", (-0.0005, -0.0021, -0.0063), (-0.0049, 0.0348, -0.0034), 0.0191),
+    ("left_gripper_0", "Link-L7", (-0.0026, 0.0479, -0.0194), (-0.0005, 0.0747, -0.0345), 0.0691),
+    ("left_gripper_1", "Link-L7", (-0.0028, 0.1352, 0.0087), (-0.002, 0.1482, -0.0759), 0.0300),
     ("left_wrist_camera", "Link-L7", (0.043, 0.094, -0.0133), (0.0434, 0.0933, -0.0563), 0.0235),
     ("left_fingers_0", "Link-L7", (0.0004, 0.136, -0.0728), (-0.0033, 0.2076, -0.0596), 0.0346),
     ("left_fingers_1", "Link-L7", (-0.0046, 0.2072, -0.01), (-0.0003, 0.1362, 0.0031), 0.0345),
     ("right_link1", "Link-R1", (-0.0032, 0.0012, 0.0211), (0.0194, -0.0036, -0.1285), 0.0732),
-    ("right_link2", "Link-R2", (-0.0979, 0.0006, 0.0193), (0.0087, 0.0051, 0.0004), 0.0504),
+    ("right_link2", "Link-R2", (-0.0881, -0.0018, 0.03), (-0.0107, 0.0076, 0.0034), 0.0639),
     ("right_link3", "Link-R3", (-0.0019, -0.0017, -0.0045), (0.0216, 0.0185, -0.1397), 0.0723),
-    ("right_link4", "Link-R4", (0.0802, 0.0356, 0.0226), (0.0755, 0.0122, 0.0296), 0.0454),
+    ("right_link4", "Link-R4", (0.0789, 0.0307, 0.0219), (0.0109, 0.0039, -0.0042), 0.0493),
     ("right_link5", "Link-R5", (0.0004, 0.0018, -0.0172), (-0.008, 0.0017, -0.1514), 0.0609),
     ("right_link6", "Link-R6", (0.0023, 0.0046, -0.0135), (-0.0004, 0.0027, -0.0426), 0.0418),
-    ("right_gripper_0", "Link-R7", (-0.0011, -0.0793, -0.0325), (-0.0167, -0.0973, -0.0375), 0.0388),
-    ("right_gripper_1", "Link-R7", (0.0004, -0.0007, -0.0061), (-0.0053, -0.0368, -0.004), 0.0192),
+    ("right_gripper_0", "Link-R7", (0.0042, -0.0442, -0.0033), (0.0069, -0.0914, -0.0347), 0.0612),
+    ("right_gripper_1", "Link-R7", (-0.0011, -0.1456, -0.0711), (-0.0011, -0.1354, 0.0106), 0.0323),
     ("right_wrist_camera", "Link-R7", (0.0443, -0.0958, -0.011), (0.0446, -0.0953, -0.0549), 0.0234),
     ("right_fingers_0", "Link-R7", (0.0003, -0.2098, -0.0576), (0.0015, -0.1384, -0.0707), 0.0346),
     ("right_fingers_1", "Link-R7", (0.0002, -0.2111, -0.0096), (0.0021, -0.1379, 0.0053), 0.0346),
     ("head", "root", (-0.0012, 0.0455, 0.1976), (-0.0044, -0.0346, 0.186), 0.1356),
     ("shoulders", "root", (-0.0214, 0.0278, 0.0263), (-0.0147, -0.0302, 0.021), 0.1794),
     ("torso", "root", (-0.0346, -0.0064, -0.1577), (-0.0278, 0.0063, -0.1641), 0.1636),
+    # The lift carriage behind the torso (rigid with it; robot.xml: body_link is fixed to it).
+    ("carriage", "root", (-0.1955, 0.0008, -0.1501), (-0.1234, -0.0098, -0.1501), 0.0922),
     # The lift column below the torso (the real body's reference set has no piece of it): an estimate, the earlier
     # model's torso cylinder, r 7 cm from 8 cm to 45 cm below the shoulders.
     ("column", "root", (0.0, 0.0, -0.08), (0.0, 0.0, -0.45), 0.07),

@@ -4,20 +4,29 @@ Provenance script, not part of the package.
 
 Source: the public repository Matisse06/AgenticTeleAvatar2.0 (``model/robot.xml`` @275c432, MuJoCo model built
 from the vendor's teleavatar_urdf_20260928-v2, and ``model/assets/collision/*.obj`` @98399bd, CoACD convex pieces
-of the vendor's collision meshes). Its vertices were read through a text index and transcribed (rounded to 1 mm,
-representative subsets: every ring and every extreme of each piece, not every vertex) into one file per MuJoCo
-body, ``<body>.txt`` with lines ``x y z`` in mm in that body's frame. The body placements used are in
-``BODY_CHAIN`` / ``GRIPPER`` below (numbers from robot.xml).
+of the vendor's collision meshes, listed in ``model/assets/collision/index.json``). Its vertices were read through
+a text index and transcribed into one file per MuJoCo body, ``<body>.txt`` with lines ``x y z`` in mm in that
+body's frame, pieces separated by ``# piece`` lines: ``RAW/`` (first session: rounded to 1 mm, representative
+subsets: every ring and every extreme of each piece) and ``RAW/full/`` (second session: rounded to 0.1 mm; the
+small pieces with every vertex, the large ones (~1,000 vertices) by their extremes and outer rings, a few tiny
+or boxy pieces by their bounding-box corners, a superset of the piece). The body placements used are in
+``BODY_CHAIN`` / ``GRIPPER`` / ``EYE`` / ``CARRIAGE`` below (numbers from robot.xml). The raw transcriptions are
+not in the repository (vendor-derived vertices); the npz records its source in its ``source`` entry.
 
 What the reference set covers (and what it does not):
 
-* left arm links 1, 3, 5, 6 (single convex hulls), link 2 (4 of its 16 pieces: both ends), link 4 (4 of 16);
-* the gripper body (14 of 32 pieces: its whole extent), the fingers (``rg-link3``; the other finger is its mirror
-  image: same mass and hull volume, centre of mass mirrored), the wrist camera (``rg-link8``); the finger
-  linkage's meshes are not in the index: its bars are represented by their joint-to-joint axes;
-* the torso and head housing (``body_link``, one hull: torso front/back, shoulder flanges, neck and head);
-* not covered: the lift carriage and mobile base below the torso (out of the arms' reach at the table), the head
-  camera module (``eye_Link``, 65 cm3, inside the head housing's hull).
+* left arm links 1, 3, 5, 6 (single convex hulls), link 2 (all 16 pieces), link 4 (all 16 pieces; pieces 1, 2,
+  4, 7, 9, 11-13 from the first of their 2-4 pages of vertices);
+* the gripper body (all 32 pieces), the fingers (``rg-link3``; the other finger is its mirror image: same mass and
+  hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers (``rg-link2``,
+  the 8 of its 16 pieces the index stores; carrier b is its mirror image), drive links (``rg-link9``,
+  ``rg-link10``), crank (``rg-link1``, 2 of 16 pieces), all placed by robot.xml's joint couplings over the opening;
+  the parallel bars (link4/link7: no piece in the index) are estimated boxes (``BAR_HALF_WIDTH``);
+* the torso and head housing (``body_link``, one hull: torso front/back, shoulder flanges, neck and head), the head
+  camera (``eye_Link``) and the lift carriage behind the torso (``lift_carriage_link``, 16 pieces), both rigid with
+  the torso;
+* not covered: the lift column and mobile base (``base_link``: their position relative to the torso depends on
+  the lift, which taplan does not model; the URDF's column body is an estimate).
 
 The right arm is the left arm's mirror image through the sagittal plane (taplan's rule ``q_left = -q_right``);
 this script checks that against the right shoulder link's own mesh (``R1_check.txt``). Frames: a MuJoCo body's
@@ -28,6 +37,7 @@ Usage::
 
     python models/teleavatar/real_body.py points RAW_DIR    # -> tests/data/real_body_points.npz, with a report
     python models/teleavatar/real_body.py fit               # capsules fitted to the npz, for make_urdf.py
+    python models/teleavatar/real_body.py coverage          # the bundled bodies against the npz, per part
     python models/teleavatar/real_body.py gripper > models/teleavatar/teleavatar.gripper.yaml  # per opening
 """
 
@@ -41,6 +51,22 @@ import pinocchio as pin
 
 ROOT = Path(__file__).resolve().parents[2]
 NPZ = ROOT / "tests" / "data" / "real_body_points.npz"
+SOURCE = (
+    "Matisse06/AgenticTeleAvatar2.0 (public repository): model/robot.xml @275c432 (body placements, gripper joint "
+    "couplings) and model/assets/collision/*.obj @98399bd (CoACD convex pieces): armL1-6_link (armR1_link_0, "
+    "armR2_link_5: mirror checks), lg-base_link_0-31, rg-link1_0-1, rg-link2 (8 of 16), rg-link3_0, rg-link8_0, "
+    "rg-link9_0, rg-link10_0, body_link_0, eye_Link_0, lift_carriage_link_0-15; vertices transcribed by hand "
+    "(0.1-1 mm), placed in taplan's link frames by models/teleavatar/real_body.py (see its docstring for what is "
+    "complete and what is representative or estimated). Points in metres; sets 'Link-XN[/part[@opening]]' and "
+    "'root/part'."
+)
+
+
+def load_points(path: Path = NPZ) -> dict[str, np.ndarray]:
+    """The reference point sets [m] of the npz (its ``source`` entry left out)."""
+    with np.load(path) as data:
+        return {k: data[k].astype(float) for k in data.files if k != "source"}
+
 
 # MuJoCo body placements (pos [m], quat wxyz) and hinge axes, from robot.xml; root: body_link.
 BODY_CHAIN = {
@@ -73,15 +99,30 @@ GRIPPER = {
         "carrier_a": ((0.10439, -0.0068, 0.023086), _Q90X),
         "carrier_b": ((0.10439, -0.0068, -0.066086), _Q90X),
         "camera": ((0.074215, -0.053784, -0.0215), _CAMERA_QUAT),
+        "crank": ((0.0985, 0.0006, -0.0215), _Q90X),
+        "bar_a": ((0.1135, -0.0098, 0.0085), _Q90X),
+        "bar_b": ((0.1135, -0.0097, -0.0515), _Q90X),
     },
     "R": {
         "carrier_a": ((0.10439, -0.0068, 0.066086), _Q90X),
         "carrier_b": ((0.10439, -0.0068, -0.023086), _Q90X),
         "camera": ((0.074215, -0.053784, 0.0215), _CAMERA_QUAT),
+        "crank": ((0.0985, 0.0006, 0.0215), _Q90X),
+        "bar_a": ((0.1135, -0.0098, 0.0515), _Q90X),
+        "bar_b": ((0.1135, -0.0097, -0.0085), _Q90X),
     },
 }
 FINGER_A = (0.040146, 0.022457, 0.0)  # finger joint in carrier a
 FINGER_B = (0.040098, -0.022543, 0.0001)  # finger joint in carrier b
+LINK9 = (-0.014975, 0.00085772, -0.0068)  # drive link in carrier a (joint 9 = -1.2 j2)
+LINK10 = (-0.014893, 0.0017878, -0.0071)  # drive link in carrier b (joint 10 = +1.2 j2)
+# The parallel bars (link4 in group a, link7 in group b; joint 4 = j2, joint 7 = -j2) have no collision piece in the
+# stored index: an estimate, a box around the bar (pivot to pivot, the carrier's finger vector, 46 mm), 7 mm each
+# side in the plane plus 7 mm past each pivot, 0..19.5 mm thick (robot.xml's centre of mass is at 9.7 mm): 16 cm3
+# against the mesh's hull of 10.8 cm3 (collision/index.json).
+BAR_HALF_WIDTH, BAR_THICKNESS = 0.007, 0.0195
+EYE = ((0.0, 0.105797711221, 0.192545691256), (0.529919264233, -0.848048096156, 0, 0))  # eye_Link in body_link
+CARRIAGE = ((0.0, -0.0768, -0.151), (1, 0, 0, 0))  # lift_carriage_link in body_link (body_link at +0.0768, +0.151)
 SHOULDER_SITE = ((-0.22, 0.0002, 0.0), (0.707106781187, 0, 0, 0.707106781187))  # left_shoulder_base in body_link
 OPENINGS = np.linspace(0.0, 1.0, 6)  # gripper input samples for the fingers' reference points
 
@@ -98,15 +139,24 @@ def _rz(angle: float) -> pin.SE3:
 def _load(raw: Path, name: str, surface: bool = True) -> np.ndarray:
     """The transcribed vertices of ``name`` [m] and, with ``surface``, points sampled on each convex piece's
     hull (pieces are separated by ``# piece`` lines; a file without them is one hull), about one per
-    ``SURFACE_SPACING`` squared: the real body is the pieces' hulls, not only their vertices."""
+    ``SURFACE_SPACING`` squared: the real body is the pieces' hulls, not only their vertices. Both transcriptions
+    are read: ``RAW/<name>.txt`` (first session) and ``RAW/full/<name>.txt`` (the pieces added later)."""
+    files = [f for f in (raw / f"{name}.txt", raw / "full" / f"{name}.txt") if f.exists()]
+    if not files:
+        raise FileNotFoundError(f"no transcription of {name} in {raw} or {raw / 'full'}")
     pieces: list[list[list[str]]] = [[]]
-    for line in (raw / f"{name}.txt").read_text().splitlines():
-        if line.startswith("# piece") and pieces[-1]:
+    for file in files:
+        for line in file.read_text().splitlines():
+            if line.startswith("# piece") and pieces[-1]:
+                pieces.append([])
+            elif line and line[0] != "#":
+                pieces[-1].append(line.split())
+        if pieces[-1]:
             pieces.append([])
-        elif line and line[0] != "#":
-            pieces[-1].append(line.split())
     out = []
     for rows in pieces:
+        if not rows:
+            continue
         vertices = np.array(rows, dtype=float) / 1000.0
         out.append(vertices)
         if surface and len(vertices) >= 4:
@@ -178,32 +228,68 @@ def link_fixes(robot, side: str, configs: np.ndarray) -> tuple[list[pin.SE3], np
     return mean, np.stack([rot_spread, trans_spread]), origin_error
 
 
+def _bar(finger_joint) -> np.ndarray:
+    """The estimated parallel bar (see ``BAR_HALF_WIDTH``): corners of its box in the bar's frame."""
+    u = np.asarray(finger_joint[:2], float)
+    length = float(np.linalg.norm(u))
+    u /= length
+    v = np.array([-u[1], u[0]])
+    w = BAR_HALF_WIDTH
+    return np.array([[*(s * u + t * v), z] for s in (-w, length + w) for t in (-w, w) for z in (0.0, BAR_THICKNESS)])
+
+
+def _place(T: pin.SE3, P: np.ndarray) -> np.ndarray:
+    return (T.rotation @ P.T).T + T.translation
+
+
 def gripper_points(raw: Path, side: str, opening: float) -> dict[str, np.ndarray]:
-    """Gripper parts in the gripper base frame at input ``opening`` (0 closed, 1 open)."""
+    """Gripper parts in the gripper base frame at input ``opening`` (0 closed, 1 open).
+
+    The two finger groups of a gripper are mirror images of each other (robot.xml: finger joint, inertials);
+    the index holds the right gripper's carrier a (``rg-link2``, 8 of its 16 pieces), finger (``rg-link3``),
+    drive links (``rg-link9``, ``rg-link10``) and crank (``rg-link1``, 2 of 16 pieces), the same parts in both
+    grippers (same inertials in their own frames), so both grippers use them; carrier b (``link5``, not in the
+    index) is carrier a mirrored (y -> -y in its frame, as the finger is); the parallel bars are estimated boxes.
+    """
     g = GRIPPER[side]
     base = _load(raw, "lg_base")
     if side == "R":  # the right gripper base is the left one mirrored through its x-y plane (robot.xml inertials)
         base = base * np.array([1.0, 1.0, -1.0])
+    mirror_y = np.array([1.0, -1.0, 1.0])
     finger = _load(raw, "rg_link3")
-    finger_b = finger * np.array([1.0, -1.0, 1.0])
+    carrier = _load(raw, "rg_link2")
     j2 = -0.98 * opening
     Ta = _se3(*g["carrier_a"]) * _rz(j2)
     Tb = _se3(*g["carrier_b"]) * _rz(-j2)
     Fa = Ta * _se3(FINGER_A, (1, 0, 0, 0)) * _rz(-j2)
     Fb = Tb * _se3(FINGER_B, (1, 0, 0, 0)) * _rz(j2)
-    # linkage bars: their joint-to-joint axes (their meshes are not available)
-    t = np.linspace(0.0, 1.0, 6)[:, None]
-    bars = np.vstack(
-        [Ta.translation + t * (Fa.translation - Ta.translation), Tb.translation + t * (Fb.translation - Tb.translation)]
-    )
+    T9 = Ta * _se3(LINK9, (1, 0, 0, 0)) * _rz(-1.2 * j2)
+    T10 = Tb * _se3(LINK10, (1, 0, 0, 0)) * _rz(1.2 * j2)
+    T1 = _se3(*g["crank"]) * _rz(opening)
+    T4 = _se3(*g["bar_a"]) * _rz(j2)
+    T7 = _se3(*g["bar_b"]) * _rz(-j2)
     camera = _se3(*g["camera"])
     return {
         "gripper": base,
-        "camera": (camera.rotation @ _load(raw, "rg_link8").T).T + camera.translation,
-        "fingers": np.vstack(
-            [(Fa.rotation @ finger.T).T + Fa.translation, (Fb.rotation @ finger_b.T).T + Fb.translation, bars]
+        "camera": _place(camera, _load(raw, "rg_link8")),
+        "fingers": np.vstack([_place(Fa, finger), _place(Fb, finger * mirror_y)]),
+        "linkage": np.vstack(
+            [
+                _place(Ta, carrier),
+                _place(Tb, carrier * mirror_y),
+                _place(T9, _load(raw, "rg_link9")),
+                _place(T10, _load(raw, "rg_link10")),
+                _place(T1, _load(raw, "rg_link1")),
+                _place(T4, _load_points(_bar(FINGER_A))),
+                _place(T7, _load_points(_bar(FINGER_B))),
+            ]
         ),
     }
+
+
+def _load_points(vertices: np.ndarray) -> np.ndarray:
+    """Vertices of one estimated convex piece and points sampled on its hull (as ``_load`` does for pieces)."""
+    return np.vstack([vertices, _hull_samples(vertices)])
 
 
 def derive(raw: Path) -> None:
@@ -258,19 +344,31 @@ def derive(raw: Path) -> None:
         f"right link 1 own mesh vs mirrored left: nearest mirrored point {1000 * np.median(gap):.1f} mm "
         f"(median), {1000 * gap.max():.1f} mm (max) away over {len(own)} points"
     )
+    # and against a piece of the right link 2 (armR2_link_5, the mirror of armL2_link_12)
+    check = _load(raw, "R2_check", surface=False)
+    T = fixes["R"][1]
+    own = _place(T, check)
+    gap = np.array([np.min(np.linalg.norm(out["Link-R2"] - p, axis=1)) for p in own])
+    report.append(
+        f"right link 2 own piece vs mirrored left: nearest mirrored point {1000 * np.median(gap):.1f} mm "
+        f"(median), {1000 * gap.max():.1f} mm (max) away over {len(own)} points"
+    )
     # grippers: parts in Link-7 (fingers per opening)
     for side in ("L", "R"):
         T = fixes[side][6]
         for s in OPENINGS:
             parts = gripper_points(raw, side, float(s))
             for name, pts in parts.items():
-                key = f"Link-{side}7/{name}" + (f"@{s:.1f}" if name == "fingers" else "")
+                key = f"Link-{side}7/{name}" + (f"@{s:.1f}" if name in ("fingers", "linkage") else "")
                 out[key] = (T.rotation @ pts.T).T + T.translation
     # torso and head housing, fixed to the root (taplan joint 0 frame = shoulder_base)
     torso = _load(raw, "body_link")
-    out["root/torso"] = (X.rotation @ torso.T).T + X.translation
+    out["root/torso"] = _place(X, torso)
+    # head camera (eye_Link) and lift carriage, both rigid with body_link (robot.xml)
+    out["root/head_camera"] = _place(X * _se3(*EYE), _load(raw, "eye_Link"))
+    out["root/carriage"] = _place(X * _se3(*CARRIAGE), _load(raw, "lift_carriage"))
     NPZ.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(NPZ, **{k: np.round(v, 4).astype(np.float32) for k, v in out.items()})
+    np.savez_compressed(NPZ, source=np.array(SOURCE), **{k: np.round(v, 4).astype(np.float32) for k, v in out.items()})
     print("\n".join(report))
     print(f"wrote {NPZ.relative_to(ROOT)}: {sum(len(v) for v in out.values())} points in {len(out)} sets")
 
@@ -342,7 +440,7 @@ def body_spec(side: str) -> list[tuple[str, str, list[str], int]]:
     name = "left" if s == "L" else "right"
     spec = [(f"{name}_link{k}", f"Link-{s}{k}", [f"Link-{s}{k}"], 1) for k in range(1, 7)]
     spec += [
-        (f"{name}_gripper", f"Link-{s}7", [f"Link-{s}7/gripper"], 2),
+        (f"{name}_gripper", f"Link-{s}7", [f"Link-{s}7/gripper"] + [f"Link-{s}7/linkage@{o:.1f}" for o in OPENINGS], 2),
         (f"{name}_wrist_camera", f"Link-{s}7", [f"Link-{s}7/camera"], 1),
         (f"{name}_fingers", f"Link-{s}7", [f"Link-{s}7/fingers@{o:.1f}" for o in OPENINGS], 2),
     ]
@@ -380,11 +478,17 @@ def fit_all(points: dict[str, np.ndarray]) -> tuple[list[tuple[str, str, np.ndar
         bodies.append((region, "root", a, b, r))
     out, over = coverage(P, caps)
     rows.append(("torso, shoulders, head", len(P), out, over))
+    # the lift carriage behind the torso, rigid with it
+    P = points["root/carriage"].astype(float)
+    a, b, r = fit_capsule(P)
+    bodies.append(("carriage", "root", a, b, r))
+    out, over = coverage(P, [(a, b, r)])
+    rows.append(("carriage", len(P), out, over))
     return bodies, rows
 
 
 def fit_report() -> None:
-    points = dict(np.load(NPZ))
+    points = load_points()
     bodies, rows = fit_all(points)
     print("# fitted by models/teleavatar/real_body.py fit (capsules in the link frame [m])")
     for name, link, a, b, r in bodies:
@@ -393,6 +497,38 @@ def fit_report() -> None:
             f"{np.ceil(r * 1e4) / 1e4:.4f}),"
         )
     print("\n| part | points | max outside [mm] | mean over-approximation [mm] |\n|---|---|---|---|")
+    for name, n, out, over in rows:
+        print(f"| {name} | {n} | {1000 * max(out, 0.0):.1f} | {1000 * over:.1f} |")
+
+
+def coverage_rows(points: dict[str, np.ndarray]) -> list[tuple[str, int, float, float]]:
+    """Coverage of the bundled model's bodies (the URDF's capsules, what taplan checks) per reference set, in
+    the joint frame of its link: (set, points, max outside [m] (<= 0: all inside), mean over-approximation [m]:
+    mean distance from a point to the surface of the bodies around it). Fingers and linkage: all openings."""
+    import taplan
+
+    robot = taplan.Robot.teleavatar()
+    groups: dict[str, list[np.ndarray]] = {}
+    for key, P in points.items():
+        groups.setdefault(key.split("@")[0], []).append(P.astype(float))
+    rows = []
+    for name in sorted(groups):
+        link = name.split("/")[0]
+        if link == "root":
+            joint, frame = 0, pin.SE3.Identity()
+        else:
+            f = robot.model.frames[robot.model.getFrameId(link)]
+            joint, frame = f.parentJoint, f.placement
+        P = _place(frame, np.vstack(groups[name]))
+        caps = [(c.start, c.end, c.radius) for c in robot.capsules if c.joint == joint]
+        out, over = coverage(P, caps)
+        rows.append((name, len(P), out, over))
+    return rows
+
+
+def coverage_report() -> None:
+    rows = coverage_rows(load_points())
+    print("| part | points | max outside [mm] | mean over-approximation [mm] |\n|---|---|---|---|")
     for name, n, out, over in rows:
         print(f"| {name} | {n} | {1000 * max(out, 0.0):.1f} | {1000 * over:.1f} |")
 
@@ -429,9 +565,11 @@ def gripper_states(points: dict[str, np.ndarray]) -> str:
 if __name__ == "__main__":
     if len(sys.argv) >= 3 and sys.argv[1] == "points":
         derive(Path(sys.argv[2]))
+    elif len(sys.argv) >= 2 and sys.argv[1] == "coverage":
+        coverage_report()
     elif len(sys.argv) >= 2 and sys.argv[1] == "fit":
         fit_report()
     elif len(sys.argv) >= 2 and sys.argv[1] == "gripper":
-        sys.stdout.write(gripper_states(dict(np.load(NPZ))))
+        sys.stdout.write(gripper_states(load_points()))
     else:
         sys.stdout.write(__doc__)
