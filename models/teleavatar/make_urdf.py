@@ -25,9 +25,9 @@ import pinocchio as pin
 # ``models/teleavatar/real_body.py fit``: every reference point of tests/data/real_body_points.npz is inside (the
 # coverage table is in docs/robot.md; ``real_body.py coverage`` recomputes it). One capsule per arm link, two for
 # the gripper body with its finger linkage, one for the wrist camera, one per finger over the whole opening range;
-# the torso as head, shoulders and torso, the lift carriage behind it; the lift column (an estimate). Cylinders
-# in the file stand for capsules of the same radius around the same segment (caps included), which is how taplan
-# reads them.
+# the torso as head, shoulders and torso, the lift carriage and the lift column behind it (over the lift's travel).
+# Cylinders in the file stand for capsules of the same radius around the same segment (caps included), which is how
+# taplan reads them.
 CAPSULES = [
     ("left_link1", "Link-L1", (-0.0016, 0.005, 0.0222), (0.0025, -0.019, -0.1287), 0.0730),
     ("left_link2", "Link-L2", (0.09, -0.0009, 0.028), (-0.0014, 0.0055, -0.0137), 0.0614),
@@ -56,9 +56,10 @@ CAPSULES = [
     ("torso", "root", (-0.0346, -0.0064, -0.1577), (-0.0278, 0.0063, -0.1641), 0.1636),
     # The lift carriage behind the torso (rigid with it; robot.xml: body_link is fixed to it).
     ("carriage", "root", (-0.1955, 0.0008, -0.1501), (-0.1234, -0.0098, -0.1501), 0.0922),
-    # The lift column below the torso (the real body's reference set has no piece of it): an estimate, the earlier
-    # model's torso cylinder, r 7 cm from 8 cm to 45 cm below the shoulders.
-    ("column", "root", (0.0, 0.0, -0.08), (0.0, 0.0, -0.45), 0.07),
+    # The lift column behind the torso, over the lift's whole travel (0..0.74 m): it stands on the mobile base while
+    # the torso rides the lift, so seen from the torso it reaches from 1.18 m below the shoulders (lift up) to 0.76 m
+    # above them (lift down).
+    ("column", "root", (-0.2243, -0.0065, -1.1647), (-0.2297, 0.0015, 0.698), 0.1155),
 ]
 
 # Named frames: (name, parent link, xyz [m], rpy [rad]).

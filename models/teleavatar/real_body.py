@@ -25,8 +25,11 @@ What the reference set covers (and what it does not):
 * the torso and head housing (``body_link``, one hull: torso front/back, shoulder flanges, neck and head), the head
   camera (``eye_Link``) and the lift carriage behind the torso (``lift_carriage_link``, 16 pieces), both rigid with
   the torso;
-* not covered: the lift column and mobile base (``base_link``: their position relative to the torso depends on
-  the lift, which taplan does not model; the URDF's column body is an estimate).
+* the lift column (``base_link`` pieces 0 and 1): it stands on the mobile base while the torso rides the lift, so
+  its place relative to the torso depends on the lift height, which taplan does not model; the reference set holds
+  it at both ends of the lift's travel (0 and 0.74 m) and its body covers every height between;
+* not covered: the mobile base (``base_link``'s other 30 pieces and the wheels, 0.4 m or more below the shoulders
+  even with the lift at its lowest).
 
 The right arm is the left arm's mirror image through the sagittal plane (taplan's rule ``q_left = -q_right``);
 this script checks that against the right shoulder link's own mesh (``R1_check.txt``). Frames: a MuJoCo body's
@@ -55,7 +58,8 @@ SOURCE = (
     "Matisse06/AgenticTeleAvatar2.0 (public repository): model/robot.xml @275c432 (body placements, gripper joint "
     "couplings) and model/assets/collision/*.obj @98399bd (CoACD convex pieces): armL1-6_link (armR1_link_0, "
     "armR2_link_5: mirror checks), lg-base_link_0-31, rg-link1_0-1, rg-link2 (8 of 16), rg-link3_0, rg-link8_0, "
-    "rg-link9_0, rg-link10_0, body_link_0, eye_Link_0, lift_carriage_link_0-15; vertices transcribed by hand "
+    "rg-link9_0, rg-link10_0, body_link_0, eye_Link_0, lift_carriage_link_0-15, base_link_0-1 (the lift column); "
+    "vertices transcribed by hand "
     "(0.1-1 mm), placed in taplan's link frames by models/teleavatar/real_body.py (see its docstring for what is "
     "complete and what is representative or estimated). Points in metres; sets 'Link-XN[/part[@opening]]' and "
     "'root/part'."
@@ -123,6 +127,10 @@ LINK10 = (-0.014893, 0.0017878, -0.0071)  # drive link in carrier b (joint 10 = 
 BAR_HALF_WIDTH, BAR_THICKNESS = 0.007, 0.0195
 EYE = ((0.0, 0.105797711221, 0.192545691256), (0.529919264233, -0.848048096156, 0, 0))  # eye_Link in body_link
 CARRIAGE = ((0.0, -0.0768, -0.151), (1, 0, 0, 0))  # lift_carriage_link in body_link (body_link at +0.0768, +0.151)
+# The lift: lift_carriage_link in base_link at (-0.028762, 0, 1.165 - lift), turned -90 deg about z, lift 0..0.74 m
+# (robot.xml's slide joint); the column (base_link pieces 0 and 1) stands still while the torso moves with the lift.
+LIFT_CARRIAGE = ((-0.028762, 0.0, 1.165), (0.707106781187, 0, 0, -0.707106781187))
+LIFT_RANGE = (0.0, 0.74)  # [m]
 SHOULDER_SITE = ((-0.22, 0.0002, 0.0), (0.707106781187, 0, 0, 0.707106781187))  # left_shoulder_base in body_link
 OPENINGS = np.linspace(0.0, 1.0, 6)  # gripper input samples for the fingers' reference points
 
@@ -367,6 +375,13 @@ def derive(raw: Path) -> None:
     # head camera (eye_Link) and lift carriage, both rigid with body_link (robot.xml)
     out["root/head_camera"] = _place(X * _se3(*EYE), _load(raw, "eye_Link"))
     out["root/carriage"] = _place(X * _se3(*CARRIAGE), _load(raw, "lift_carriage"))
+    # the lift column seen from the torso at both ends of the lift's travel (it is a vertical prism: the body fitted
+    # to both contains it at every height between)
+    column = _load(raw, "base_link_column")
+    for lift in LIFT_RANGE:
+        carriage = _se3((LIFT_CARRIAGE[0][0], LIFT_CARRIAGE[0][1], LIFT_CARRIAGE[0][2] - lift), LIFT_CARRIAGE[1])
+        body_link = carriage * _se3(*CARRIAGE).inverse()  # body_link in base_link
+        out[f"root/column@{lift:.2f}"] = _place(X * body_link.inverse(), column)
     NPZ.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(NPZ, source=np.array(SOURCE), **{k: np.round(v, 4).astype(np.float32) for k, v in out.items()})
     print("\n".join(report))
@@ -478,12 +493,13 @@ def fit_all(points: dict[str, np.ndarray]) -> tuple[list[tuple[str, str, np.ndar
         bodies.append((region, "root", a, b, r))
     out, over = coverage(P, caps)
     rows.append(("torso, shoulders, head", len(P), out, over))
-    # the lift carriage behind the torso, rigid with it
-    P = points["root/carriage"].astype(float)
-    a, b, r = fit_capsule(P)
-    bodies.append(("carriage", "root", a, b, r))
-    out, over = coverage(P, [(a, b, r)])
-    rows.append(("carriage", len(P), out, over))
+    # the lift carriage behind the torso, rigid with it; the lift column over the lift's travel
+    for name, sets in (("carriage", ["root/carriage"]), ("column", [k for k in points if k.startswith("root/column")])):
+        P = np.vstack([points[k] for k in sets]).astype(float)
+        a, b, r = fit_capsule(P)
+        bodies.append((name, "root", a, b, r))
+        out, over = coverage(P, [(a, b, r)])
+        rows.append((name, len(P), out, over))
     return bodies, rows
 
 

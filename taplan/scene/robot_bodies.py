@@ -2,8 +2,9 @@
 
 Bodies are capsules on links (a sphere is a capsule of zero length): the URDF's collision cylinders, read as the
 capsules around them (:mod:`taplan.scene.capsules`). For the bundled TeleAvatar they are fitted to the real robot's
-body (every part: arm links, gripper body, fingers, wrist cameras, torso, shoulders, head; the lift column is an
-estimate; see ``models/teleavatar/real_body.py`` and ``models/README.md``).
+body (every part: arm links, gripper body with the finger linkage, fingers, wrist cameras, torso, shoulders, head,
+head camera, lift carriage, and the lift column over the lift's travel; see ``models/teleavatar/real_body.py`` and
+``docs/robot.md``).
 
 **Allowed pairs** (never checked) come from the robot's SRDF when it has one (``<urdf stem>.srdf`` next to the
 URDF, MoveIt's ``disable_collisions`` elements, here naming bodies), derived by :func:`sweep_pairs` over the joint
