@@ -110,7 +110,7 @@ def test_collision_distance_jacobian_matches_finite_differences(robot, rng):
         assert d == pytest.approx(capsule_distance(kin.data, first, second))
         np.testing.assert_allclose(grad, _fd_jacobian(dist, q)[0], atol=JAC_TOL)
         checked += 1
-    assert checked == len(robot.capsule_pairs("left", "right")) == 105  # the arm-arm pairs the SRDF keeps
+    assert checked == len(robot.capsule_pairs("left", "right")) == 106  # the arm-arm pairs the SRDF keeps
 
 
 # ------------------------------------------------------------------------------------------------- limit effects

@@ -114,7 +114,8 @@ def _capsule_element(name: str, start, end, radius: float) -> ET.Element:
     collision = ET.Element("collision", name=name)
     ET.SubElement(collision, "origin", xyz=_fmt((start + end) / 2), rpy=_fmt(_rpy_z_to(end - start)))
     geometry = ET.SubElement(collision, "geometry")
-    ET.SubElement(geometry, "cylinder", radius=f"{radius:g}", length=f"{np.linalg.norm(end - start):.6g}")
+    # 10 digits: a 6-digit length put the ends of the 1.9 m column 2.5 um off
+    ET.SubElement(geometry, "cylinder", radius=f"{radius:g}", length=f"{np.linalg.norm(end - start):.10g}")
     return collision
 
 
