@@ -160,3 +160,67 @@ def test_segment_box_and_cylinder_against_dense_sampling() -> None:
     cylinder_dense = np.hypot(radial, axial).min(axis=1)
     cylinder_exact = np.linalg.norm(e0 + s[:, None] * (e1 - e0) - near, axis=1)
     assert np.all(cylinder_exact <= cylinder_dense + 1e-10) and np.all(cylinder_dense - cylinder_exact < 1e-4)
+
+
+def _full_scene(seed: int, attached: bool = True) -> Scene:
+    """Every closed-form shape, perceived occupancy (voxels as boxes) and an attached object."""
+    from taplan.scene.occupancy import Occupancy
+
+    scene = _scene(seed)
+    rng = np.random.default_rng(seed + 100)
+    voxels = np.unique(rng.integers(0, 12, (60, 3)), axis=0)
+    scene.add("seen", Occupancy(0.02, np.array([0.3, -0.15, -0.45]), voxels))
+    if attached:
+        scene.attach("tool", Cylinder(0.03, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    return scene
+
+
+@pytest.mark.parametrize(("seed", "native", "attached"), [(0, True, True), (1, True, False), (2, False, True)])
+def test_single_queries_equal_the_coal_reference(robot: taplan.Robot, seed: int, native: bool, attached: bool) -> None:
+    """CollisionWorld.distances (closed forms; end points from the compiled kernel, or pinocchio without one)
+    against the coal reference (engine=False): the same pairs in the same order, distances to 1e-9 m, Jacobians
+    where the witnesses are unique."""
+    scene = _full_scene(seed, attached)
+    world, reference = CollisionWorld(robot, scene), _reference(robot, scene)
+    if not native:
+        world._kernel = None  # as without a C compiler
+    world._request.gjk_tolerance = world._request.epa_tolerance = 1e-12  # both use coal for the attached pairs
+    cylinders = {"pole", "drum", "tool"}
+    compared = penetrating = 0
+    for q in _configurations(robot, 40, seed + 10):
+        for cutoff, bound in ((np.inf, np.inf), (0.05, np.inf), (np.inf, 0.1), (np.inf, -np.inf)):
+            got = world.distances(q, cutoff=cutoff, bound_beyond=bound)
+            ref = reference.distances(q, cutoff=cutoff, bound_beyond=bound)
+            assert got.pairs == ref.pairs
+            np.testing.assert_allclose(got.distance, ref.distance, rtol=0, atol=DIST_TOL)
+            np.testing.assert_allclose(got.travel, ref.travel, rtol=0, atol=1e-12)
+            if bound < np.inf:
+                continue  # bounds: their witnesses are nominal
+            clear = ref.distance > 1e-6  # penetrating pairs: coal's EPA witnesses are not unique
+            penetrating += int(np.sum(~clear))
+            for k in np.flatnonzero(clear):
+                tolerance = CYLINDER_JAC_TOL if ref.pairs[k][1] in cylinders else JAC_TOL
+                np.testing.assert_allclose(got.jacobian[k], ref.jacobian[k], rtol=0, atol=tolerance)
+                np.testing.assert_allclose(got.normal[k], ref.normal[k], rtol=0, atol=1e-4)
+                compared += 1
+        (d, pair), (d_ref, pair_ref) = world.min_distance(q), reference.min_distance(q)
+        assert d == pytest.approx(d_ref, abs=DIST_TOL) and (pair == pair_ref or d < -1e-6)
+    assert penetrating > 0 and compared > 1000  # both regimes were exercised
+    assert any(p[1] == "seen" for p in ref.pairs) and attached == any(p[0] == "tool" for p in ref.pairs)
+
+
+def test_single_query_jacobian_matches_finite_differences(robot: taplan.Robot) -> None:
+    scene = _full_scene(3)
+    world = CollisionWorld(robot, scene)
+    world._request.gjk_tolerance = world._request.epa_tolerance = 1e-12  # coal's 1e-6 m would swamp h = 1e-6 rad
+    h = 1e-6
+    rng = np.random.default_rng(6)
+    for q in _configurations(robot, 8, 5):
+        got = world.distances(q)
+        dq = rng.normal(size=robot.nq)
+        dq /= np.linalg.norm(dq)
+        plus, minus = world.distances(q + h * dq), world.distances(q - h * dq)
+        assert plus.pairs == got.pairs == minus.pairs
+        numeric = (plus.distance - minus.distance) / (2 * h)
+        smooth = got.distance > 1e-3  # away from contact the distance is differentiable
+        np.testing.assert_allclose((got.jacobian @ dq)[smooth], numeric[smooth], rtol=0, atol=FD_TOL)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import coal
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import taplan
@@ -137,6 +138,7 @@ def test_self_distances_match_coal(robot) -> None:
     request.enable_signed_distance = True
     for q in _random_states(robot, 20, 1):
         d = world.distances(q, jacobian=False)
+        pin.forwardKinematics(world.model, world.data, q)  # the bodies' placements (the query need not set them)
         transforms = world._body_transforms()
         index = {b.name: k for k, b in enumerate(world.bodies)}
         for (a, b), value in zip(d.pairs, d.distance, strict=True):

@@ -488,6 +488,52 @@ _SOLVERS = {
 }
 
 
+def solid_pairs(
+    kind: np.ndarray, size: np.ndarray, core: np.ndarray, e0: np.ndarray, e1: np.ndarray, radius: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Robot capsules against solid closed-form obstacles (box, sphere, capsule, cylinder), one pair per row, each
+    in its obstacle's frame: ``kind`` (P,) the obstacle's code, ``size`` (P, 3) its :func:`_half_extents`,
+    ``core`` (P,) its rounding radius (sphere, capsule; ignored for the others), ``e0``, ``e1`` (P, 3) the robot
+    segment, ``radius`` (P,) the robot capsule's.
+
+    Returns (s, d, pa, pb, normal, inside): the witness parameter on the robot segment, the signed distance [m],
+    the witness points on the robot capsule and on the obstacle and the unit normal from the obstacle to the robot
+    (obstacle frame), and where the distance is a penetration depth that needs coal's EPA instead (the axis touches
+    or enters a box or cylinder, or a capsule is inside a cylinder) -- the same cases as :meth:`DistanceEngine.
+    evaluate`."""
+    P = len(kind)
+    s = np.zeros(P)
+    near = np.zeros((P, 3))
+    for code in (_BOX, _SPHERE, _CAPSULE, _CYLINDER):
+        pick = np.flatnonzero(kind == code)
+        if pick.size == P:  # one kind only (a table scene of boxes): no gathering
+            s, near = _SOLVERS[code](e0, e1, size)
+        elif pick.size:
+            s[pick], near[pick] = _SOLVERS[code](e0[pick], e1[pick], size[pick])
+    p = e0 + s[:, None] * (e1 - e0)
+    delta = p - near
+    norm = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+    normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+    rounded = (kind == _SPHERE) | (kind == _CAPSULE)
+    core = np.where(rounded, core, 0.0)  # a cylinder's radius is in its solver's nearest point already
+    d = norm - core - radius
+    pb = near + core[:, None] * normal
+    pa = p - radius[:, None] * normal
+    inside = ((norm <= 1e-12) & ~rounded) | ((kind == _CYLINDER) & (d < 0.0))
+    return s, d, pa, pb, normal, inside
+
+
+def shape_code(shape: Any) -> int:
+    """The engine's code of a closed-form shape (-1: none, e.g. a mesh)."""
+    return _KINDS.get(type(shape), -1)
+
+
+def shape_size(shape: Any) -> tuple[float, float, float]:
+    """A closed-form shape's size as the engine's solvers take it (half extents; cylinder: radius, radius, half
+    length; capsule: 0, 0, half length)."""
+    return _half_extents(shape)
+
+
 class _Kinematics:
     """Body segment end points and their Jacobians for N configurations: a compiled CasADi function per
     configuration when a C compiler is available, else pinocchio."""

@@ -14,7 +14,6 @@ carried by their links is ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))``, with the
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -23,7 +22,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan.errors import CollisionError, InvalidInputError
-from taplan.scene.engine import segment_parameters
+from taplan.scene.engine import segment_parameters, shape_code, shape_size, solid_pairs
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import Scene
 from taplan.scene.shapes import Box, HalfSpace
@@ -71,7 +70,9 @@ class Distances:
 @dataclass(frozen=True)
 class _Pairs:
     """Pairs of one kind, before they are joined: names, distances, witness points, normals, the joints carrying
-    each member (0: fixed) and the travel rows."""
+    each member (0: fixed) and the travel rows; where a member is a robot body (its index in ``body_a``/``body_b``,
+    -1: not a body) the witness's parameter on that body's segment (``s_a``/``s_b``), from which its Jacobian row
+    follows from the segment end points' Jacobians (None: from the witness point and the joint Jacobians)."""
 
     names: list[tuple[str, str]]
     distance: np.ndarray
@@ -81,6 +82,10 @@ class _Pairs:
     owner_a: np.ndarray
     owner_b: np.ndarray
     travel: np.ndarray
+    body_a: np.ndarray | None = None
+    s_a: np.ndarray | None = None
+    body_b: np.ndarray | None = None
+    s_b: np.ndarray | None = None
 
 
 class _PairList:
@@ -170,6 +175,11 @@ class CollisionWorld:
         self._items: list[_Item] = []
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
+        # penetration depths of closed-form pairs: to the closed forms' accuracy (as the engine), not GJK's 1e-6 m
+        self._depth_request = coal.DistanceRequest()
+        self._depth_request.enable_signed_distance = True
+        self._depth_request.gjk_tolerance = 1e-12
+        self._depth_request.epa_tolerance = 1e-12
         self.use_engine = bool(engine)
         self._engine: Any = None
 
@@ -216,6 +226,7 @@ class CollisionWorld:
             geometry = coal.Capsule(b.radius, length) if length > 1e-9 else coal.Sphere(b.radius)
             self._body_geometry.append((geometry, _segment_frame(b.start, b.end)))
         self.reach = self._reach()
+        self._kernel: Any = False  # the compiled end point kernel of these bodies: looked up on first use
 
     # ----------------------------------------------------------------------------------------------- helpers
     def _chain_reach(self, joint: int, extent: float) -> np.ndarray:
@@ -261,6 +272,11 @@ class CollisionWorld:
                 )
             ]
         ).reshape(-1, 3)
+        solids = [o.shape for o in obstacles if not hasattr(o.shape, "capsule_distances")]
+        # closed forms of the solid items (engine codes; -1: coal, e.g. meshes) and their sizes for the solvers
+        self._item_kind = np.array([shape_code(shape) for shape in solids], dtype=int)
+        self._item_size = np.array([shape_size(shape) for shape in solids], dtype=float).reshape(-1, 3)
+        self._item_core = np.array([getattr(shape, "radius", 0.0) for shape in solids], dtype=float)
         self._half_index = np.array([k for k, item in enumerate(self._items) if item.halfspace], dtype=int)
         self._solid_index = np.array([k for k, item in enumerate(self._items) if not item.halfspace], dtype=int)
         for item in self._items:
@@ -294,24 +310,48 @@ class CollisionWorld:
         q = self._configuration(q)
         self._refresh()
         model, data = self.model, self.data
-        if jacobian:
-            pin.computeJointJacobians(model, data, q)  # WORLD-frame columns of every joint in data.J
-        else:
-            pin.forwardKinematics(model, data, q)
-        pin.updateFramePlacements(model, data)
-        rotation = np.array([data.oMi[j].rotation for j in self._body_joint.tolist()])  # (B, 3, 3)
-        origin = np.array([data.oMi[j].translation for j in self._body_joint.tolist()])  # (B, 3)
-        starts = np.einsum("bij,bj->bi", rotation, self._body_start) + origin
-        ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
+        kernel = self._end_point_kernel()
+        attached = bool(self._attached_items())
+        JE = None
+        if kernel is not None:  # the bodies' end points (and their Jacobians) in one compiled call
+            function, q_in, e_out, j_out = kernel
+            q_in[:] = q
+            function()
+            points = e_out.reshape(-1, 2, 3).copy()
+            starts, ends = points[:, 0], points[:, 1]
+            if jacobian:
+                JE = j_out.reshape(model.nv, -1, 2, 3).transpose(1, 2, 3, 0).copy()  # (B, 2, 3, nv)
+        if kernel is None or attached:  # attached objects ride on frames: pinocchio's placements
+            if jacobian:
+                pin.computeJointJacobians(model, data, q)  # WORLD-frame columns of every joint in data.J
+            else:
+                pin.forwardKinematics(model, data, q)
+            pin.updateFramePlacements(model, data)
+        if kernel is None:
+            rotation = np.array([data.oMi[j].rotation for j in self._body_joint.tolist()])  # (B, 3, 3)
+            origin = np.array([data.oMi[j].translation for j in self._body_joint.tolist()])  # (B, 3)
+            starts = np.einsum("bij,bj->bi", rotation, self._body_start) + origin
+            ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
         parts: list[_Pairs] = []
         if self.self_pairs:
             parts += self._self_distances(starts[None], ends[None], cutoff)
         if self._items:
             parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
         parts += self._field_distances(starts, ends, cutoff, bound_beyond)
-        if self._attached_items():
+        if attached:
             parts.append(self._attached_distances(starts, ends, cutoff, bound_beyond))
-        return self._joined(parts, data.J if jacobian else None)
+        return self._joined(parts, data.J if jacobian and (kernel is None or attached) else None, JE)
+
+    def _end_point_kernel(self) -> Any:
+        """The compiled kernel ``q -> body end points, their Jacobians`` (:mod:`taplan.scene.engine`), or None
+        (the engine disabled, or no C compiler: pinocchio then)."""
+        if not self.use_engine:
+            return None
+        if self._kernel is False:
+            from taplan.scene.engine import _native_kernel
+
+            self._kernel = _native_kernel(self)
+        return self._kernel
 
     def distances_many(self, configurations: npt.ArrayLike, *, cutoff: float) -> list[Distances]:
         """:meth:`distances` (with Jacobians, exact) at several configurations (N, nq) in one batch: the same
@@ -345,14 +385,7 @@ class CollisionWorld:
             for n, part in enumerate(self._self_distances(starts, ends, cutoff)):
                 parts[n].append(part)
         for n in range(N) if self._items else ():
-            transforms: dict[int, Any] = {}
-
-            def transform(body: int, n: int = n, transforms: dict[int, Any] = transforms) -> Any:
-                if body not in transforms:
-                    transforms[body] = self._coal_placement(rotation[n, body], origin[n, body], body)
-                return transforms[body]
-
-            parts[n].append(self._obstacle_distances(starts[n], ends[n], cutoff, math.inf, transform))
+            parts[n].append(self._obstacle_distances(starts[n], ends[n], cutoff, math.inf))
         for n in range(N) if self._fields else ():
             parts[n] += self._field_distances(starts[n], ends[n], cutoff, math.inf)
         return [self._joined(parts[n], jacobians[n]) for n in range(N)]
@@ -444,41 +477,56 @@ class CollisionWorld:
             batch.travel[keep],
         )
 
-    def _joined(self, parts: list[_Pairs], J: np.ndarray | None) -> Distances:
-        """One :class:`Distances` from the parts, with ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))`` from the WORLD-frame
-        joint Jacobians ``J`` (6, nv) of the configuration (a point's velocity is ``v + ω × p``), or None."""
+    def _joined(self, parts: list[_Pairs], J: np.ndarray | None, JE: np.ndarray | None = None) -> Distances:
+        """One :class:`Distances` from the parts, with ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))``: for a robot body's
+        witness at parameter ``s`` on its segment from the end points' Jacobians ``JE`` (B, 2, 3, nv),
+        ``n · ((1 − s) J(e0) + s J(e1))`` (its offset ``r n`` from the axis adds ``n · (ω × r n) = 0``); else from
+        the WORLD-frame joint Jacobians ``J`` (6, nv) of the configuration (a point's velocity is ``v + ω × p``).
+        Both None: no Jacobians."""
         nv = self.model.nv
         names = tuple(name for part in parts for name in part.names)
         count = len(names)
 
-        def column(field: str, shape: tuple[int, ...], dtype: type = float) -> np.ndarray:
-            values = [getattr(part, field) for part in parts]
+        def column(field: str, shape: tuple[int, ...], dtype: type = float, missing: float = 0.0) -> np.ndarray:
+            values = [
+                getattr(part, field) if getattr(part, field) is not None else np.full(len(part.names), missing)
+                for part in parts
+            ]
             return np.concatenate(values).reshape(count, *shape) if values else np.zeros((0, *shape), dtype=dtype)
 
         distance, travel = column("distance", ()), column("travel", (nv,))
         point_a, point_b, normal = (column(field, (3,)) for field in ("point_a", "point_b", "normal"))
         rows = None
-        if J is not None:
+        if J is not None or JE is not None:
             rows = np.zeros((count, nv))
-            for field, point, sign in (("owner_a", point_a, 1.0), ("owner_b", point_b, -1.0)):
-                owner = column(field, (), int).astype(int)
-                moving = owner > 0
+            for side, point, sign in (("a", point_a, 1.0), ("b", point_b, -1.0)):
+                moving = column("owner_" + side, (), int).astype(int) > 0
+                if JE is not None:  # robot bodies' witnesses: from their segments' end points
+                    body = column("body_" + side, (), int, -1).astype(int)
+                    on_body = moving & (body >= 0)
+                    if np.any(on_body):
+                        k, n, at = body[on_body], normal[on_body], column("s_" + side, ())[on_body]
+                        j0 = np.einsum("pk,pkv->pv", n, JE[k, 0])
+                        j1 = np.einsum("pk,pkv->pv", n, JE[k, 1])
+                        rows[on_body] += sign * (j0 + at[:, None] * (j1 - j0))
+                    moving &= body < 0
                 if np.any(moving):
+                    assert J is not None, "members that are not robot bodies need the joint Jacobians"
+                    owner = column("owner_" + side, (), int).astype(int)[moving]
                     n = normal[moving]
                     row = n @ J[:3] + np.cross(point[moving], n) @ J[3:]
-                    rows[moving] += sign * row * self._support[owner[moving]]
+                    rows[moving] += sign * row * self._support[owner]
         return Distances(names, distance, point_a, point_b, normal, rows, travel)
 
     def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> list[_Pairs]:
         """Robot body pairs (capsules) in closed form, for N configurations (``starts``, ``ends``: (N, B, 3))."""
         i_idx, j_idx = self._self_index
         N, S = len(starts), len(i_idx)
-        pa, pb = _closest_points(
-            starts[:, i_idx].reshape(-1, 3),
-            ends[:, i_idx].reshape(-1, 3),
-            starts[:, j_idx].reshape(-1, 3),
-            ends[:, j_idx].reshape(-1, 3),
-        )
+        a0, a1 = starts[:, i_idx].reshape(-1, 3), ends[:, i_idx].reshape(-1, 3)
+        b0, b1 = starts[:, j_idx].reshape(-1, 3), ends[:, j_idx].reshape(-1, 3)
+        s, t = segment_parameters(a0, a1, b0, b1)
+        pa, pb = a0 + s[:, None] * (a1 - a0), b0 + t[:, None] * (b1 - b0)
+        s, t = s.reshape(N, S), t.reshape(N, S)
         delta = pa - pb
         norm = np.linalg.norm(delta, axis=1)
         d = (norm - np.tile(self._radius[i_idx] + self._radius[j_idx], N)).reshape(N, S)
@@ -500,6 +548,10 @@ class CollisionWorld:
                     self._body_joint[i_idx[keep]],
                     self._body_joint[j_idx[keep]],
                     travel[keep],
+                    i_idx[keep],
+                    s[n, keep],
+                    j_idx[keep],
+                    t[n, keep],
                 )
             )
         return out
@@ -510,10 +562,11 @@ class CollisionWorld:
         ends: np.ndarray,
         cutoff: float,
         bound_beyond: float,
-        transform: Callable[[int], Any] | None = None,
     ) -> _Pairs:
         """Moving robot bodies vs static obstacles: half-spaces in closed form, others bounded by their bounding
-        spheres and queried with coal when that bound is within ``bound_beyond``. Item-major order."""
+        spheres and boxes and, when that bound is within ``bound_beyond``, computed exactly: in closed form (boxes,
+        spheres, capsules, cylinders: :func:`~taplan.scene.engine.solid_pairs`; with ``use_engine``) or by coal
+        (meshes, penetration depths). Item-major order."""
         movers = self._movers
         s0, s1 = starts[movers], ends[movers]  # (Bm, 3)
         radius = self._radius[movers]
@@ -523,7 +576,7 @@ class CollisionWorld:
         pa = np.empty((M, Bm, 3))
         pb = np.empty((M, Bm, 3))
         n = np.empty((M, Bm, 3))
-        exact = np.zeros((M, Bm), dtype=bool)
+        along = np.full((M, Bm), 0.5)  # the witness's parameter on the body's segment (bounds: its middle)
         half = self._half_index
         if half.size:
             normal = self._item_normal[half]  # (H, 3)
@@ -535,7 +588,7 @@ class CollisionWorld:
             n[half] = normal[:, None, :]
             pa[half] = low - radius[None, :, None] * normal[:, None, :]
             pb[half] = low - gap[:, :, None] * normal[:, None, :]
-            exact[half] = True
+            along[half] = np.where(h0 <= h1, 0.0, 1.0)
         solid = self._solid_index
         transforms: dict[int, Any] = {}
         if solid.size:
@@ -562,14 +615,36 @@ class CollisionWorld:
             pa[solid] = mid[None]
             pb[solid] = np.broadcast_to(center[:, None, :], away.shape)
             n[solid] = away / np.maximum(np.linalg.norm(away, axis=2), 1e-12)[:, :, None]
-            for s_row, b_col in zip(*np.nonzero((gap <= cutoff) & (gap <= bound_beyond)), strict=True):
-                item, body = items[solid[s_row]], int(movers[b_col])
-                if body not in transforms:
-                    transforms[body] = self._body_transform(body) if transform is None else transform(body)
+            s_rows, b_cols = np.nonzero((gap <= cutoff) & (gap <= bound_beyond))
+            m_rows = solid[s_rows]
+            closed = self._item_kind[m_rows] >= 0 if self.use_engine else np.zeros(len(m_rows), dtype=bool)
+            if closed.any():  # boxes, spheres, capsules, cylinders: closed forms for all these pairs at once
+                m, b = m_rows[closed], b_cols[closed]
+                R, c = self._item_rotation[m], self._item_center[m]
+                e0 = np.einsum("pji,pj->pi", R, s0[b] - c)  # in the obstacle's frame: Rᵀ (x − c)
+                e1 = np.einsum("pji,pj->pi", R, s1[b] - c)
+                size, core = self._item_size[m], self._item_core[m]
+                s_k, d_k, pa_k, pb_k, n_k, inside = solid_pairs(self._item_kind[m], size, core, e0, e1, radius[b])
+                d[m, b], along[m, b] = d_k, s_k
+                pa[m, b] = np.einsum("pij,pj->pi", R, pa_k) + c
+                pb[m, b] = np.einsum("pij,pj->pi", R, pb_k) + c
+                n[m, b] = np.einsum("pij,pj->pi", R, n_k)
+                # the axis touches or enters the solid: a penetration depth, coal's EPA (as the engine does)
+                coal_pairs = [(int(i), int(j), self._depth_request) for i, j in zip(m[inside], b[inside], strict=True)]
+            else:
+                coal_pairs = []
+            coal_pairs += [
+                (int(i), int(j), self._request) for i, j in zip(m_rows[~closed], b_cols[~closed], strict=True)
+            ]
+            for m_k, b_col, request in coal_pairs:
+                item, body = items[m_k], int(movers[b_col])
+                if body not in transforms:  # the capsule's frame from its end points (any turn about its axis)
+                    frame = _segment_frame(s0[b_col], s1[b_col])
+                    transforms[body] = self._coal.Transform3s(frame[:3, :3], frame[:3, 3])
                 geometry, placement = self._body_geometry[body][0], transforms[body]
-                d_k, pa_k, pb_k, n_k = self._pair(item.geometry, item.transform, geometry, placement)
-                m = solid[s_row]
-                d[m, b_col], pa[m, b_col], pb[m, b_col], n[m, b_col] = d_k, pa_k, pb_k, n_k
+                d_k, pa_k, pb_k, n_k = self._pair(item.geometry, item.transform, geometry, placement, request)
+                d[m_k, b_col], pa[m_k, b_col], pb[m_k, b_col], n[m_k, b_col] = d_k, pa_k, pb_k, n_k
+                along[m_k, b_col] = _parameter(pa_k + radius[b_col] * n_k, s0[b_col], s1[b_col])
         rows, cols = np.nonzero(d <= cutoff)
         names = [(self.bodies[movers[c]].name, items[r].name) for r, c in zip(rows, cols, strict=True)]
         paired = movers[cols]
@@ -582,6 +657,10 @@ class CollisionWorld:
             self._body_joint[paired],
             np.zeros(len(rows), dtype=int),
             self._body_reach[paired],
+            paired,
+            along[rows, cols],
+            np.full(len(rows), -1),
+            np.zeros(len(rows)),
         )
         return part
 
@@ -599,6 +678,10 @@ class CollisionWorld:
             )
             keep = np.flatnonzero((d <= cutoff) & np.isfinite(d))
             paired = movers[keep]
+            # the witness's parameter on the body's axis (its point on the axis is pa + r n), obstacle frame
+            r = self._radius[paired]
+            on_axis = pa[keep] + r[:, None] * n[keep]
+            along = _parameter(on_axis, (starts[paired] - t) @ R, (ends[paired] - t) @ R)
             out.append(
                 _Pairs(
                     [(self.bodies[k].name, o.name) for k in paired],
@@ -609,6 +692,10 @@ class CollisionWorld:
                     self._body_joint[paired],
                     np.zeros(len(keep), dtype=int),
                     self._body_reach[paired],
+                    paired,
+                    along,
+                    np.full(len(keep), -1),
+                    np.zeros(len(keep)),
                 )
             )
         return out
@@ -680,10 +767,12 @@ class CollisionWorld:
     def _body_geometry_at(self, k: int, transforms: list[Any]) -> tuple[Any, Any]:
         return self._body_geometry[k][0], transforms[k]
 
-    def _pair(self, g1: Any, t1: Any, g2: Any, t2: Any) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    def _pair(
+        self, g1: Any, t1: Any, g2: Any, t2: Any, request: Any = None
+    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """coal distance between object 1 (b) and object 2 (a): (d, p_a, p_b, n from b to a)."""
         result = self._coal.DistanceResult()
-        d = float(self._coal.distance(g1, t1, g2, t2, self._request, result))
+        d = float(self._coal.distance(g1, t1, g2, t2, self._request if request is None else request, result))
         pb = np.array(result.getNearestPoint1())
         pa = np.array(result.getNearestPoint2())
         n = np.array(result.normal, dtype=float)
@@ -746,6 +835,15 @@ def _segment_frame(start: np.ndarray, end: np.ndarray) -> np.ndarray:
         x /= np.linalg.norm(x)
         T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
     return T
+
+
+def _parameter(point: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The parameter in [0, 1] of the projection of ``point`` on the segment ``[start, end]`` (row-wise for (P, 3)
+    arrays; 0 for a zero-length segment)."""
+    axis = end - start
+    length2 = np.sum(axis * axis, axis=-1)
+    along = np.sum((point - start) * axis, axis=-1) / np.maximum(length2, 1e-18)
+    return np.clip(np.where(length2 > 1e-18, along, 0.0), 0.0, 1.0)
 
 
 def _closest_points(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
