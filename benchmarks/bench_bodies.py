@@ -4,24 +4,35 @@ Measured on the bundled TeleAvatar and table scene (``models/teleavatar/scenes/t
 
 * ``distances``: ``CollisionWorld.distances(q)`` with Jacobians (every pair: self and scene) at 200 random clear
   configurations; queries per second = 1 / median;
+* ``distances, cutoff``: the same within 0.15 m (what the IK's scene limit asks for: influence plus a band);
 * ``min_distance``: ``CollisionWorld.min_distance(q)`` (no Jacobians), same configurations;
+* ``ik step``: ``DifferentialIK.step`` with the scene (``SceneLimit``) and the arm-arm ``CollisionLimit``, both
+  hands moving to targets 10 cm below their home poses: 3 x 300 consecutive steps (dt 0.01 s) from home;
 * ``planning``: ``plan_motion`` (5 s budget) on the seeded problems of ``benchmarks/_scenes.py`` (every family in
   turn; the problems are drawn clear for the bodies under test, so each version plans its own set): success and
-  time per family;
-* ``ik step``: ``DifferentialIK.step`` with the scene (``SceneLimit``) and the arm-arm ``CollisionLimit``, both
-  hands moving to targets 10 cm below their home poses: 3 x 300 consecutive steps (dt 0.01 s) from home.
+  time per family.
 
-The same file runs against another checkout for a before/after figure (its taplan on ``PYTHONPATH``):
-``PYTHONPATH=<checkout> python benchmarks/bench_bodies.py --no-save``.
+Each query is timed per call after a warm-up, wall clock and CPU time (``time.process_time``: the machine is shared,
+CPU time is the steadier figure); median and p95. Side by side in the same run:
 
-Run: ``python -m benchmarks.bench_bodies [--no-save]``.
+* ``coal``: the same world with ``engine=False`` (every robot-obstacle pair a coal query, the joint Jacobians from
+  pinocchio): the per-pair path the closed forms replace;
+* ``--baseline CHECKOUT``: another checkout's taplan (e.g. the commit before the real body) in a subprocess with
+  the same script, e.g. ``git worktree add /tmp/before 3769945`` then ``--baseline /tmp/before``.
+
+Run: ``python -m benchmarks.bench_bodies [--no-save] [--planning N] [--baseline CHECKOUT]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,26 +42,51 @@ from taplan.scene import CollisionWorld
 from taplan.scene.io import load_scene
 
 SCENE = Path(taplan.__file__).parent / "models" / "teleavatar" / "scenes" / "table.yaml"
+CUTOFF = 0.15  # [m] the IK scene limit's band (influence 0.05 m + 0.1 m)
+QUERIES = ("distances", "distances_cutoff", "min_distance", "ik_step")
+LABELS = {
+    "distances": "distances, all pairs, with Jacobians",
+    "distances_cutoff": f"distances within {CUTOFF} m, with Jacobians",
+    "min_distance": "min_distance",
+    "ik_step": "IK step, scene + arm-arm avoidance",
+}
 
 
-def _times(func, calls: list, warmup: int = 20) -> np.ndarray:
+def _times(func, calls: list, warmup: int = 20) -> dict[str, float]:
     for args in calls[:warmup]:
         func(*args)
-    out = []
+    wall, cpu = [], []
     for args in calls:
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         func(*args)
-        out.append(time.perf_counter() - t0)
-    return np.array(out) * 1e6
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return _stats(np.array(wall) * 1e6, np.array(cpu) * 1e6)
 
 
-def _stats(us: np.ndarray) -> dict[str, float]:
-    return {"median_us": float(np.median(us)), "p95_us": float(np.percentile(us, 95))}
+def _stats(wall_us: np.ndarray, cpu_us: np.ndarray) -> dict[str, float]:
+    return {
+        "median_us": float(np.median(wall_us)),
+        "p95_us": float(np.percentile(wall_us, 95)),
+        "cpu_median_us": float(np.median(cpu_us)),
+        "cpu_p95_us": float(np.percentile(cpu_us, 95)),
+        "per_second": float(1e6 / np.median(wall_us)),
+    }
 
 
-def measure() -> dict[str, dict[str, float]]:
+def _world(robot: taplan.Robot, engine: bool) -> CollisionWorld:
+    scene = load_scene(SCENE)
+    if engine:
+        return CollisionWorld(robot, scene)
+    try:
+        return CollisionWorld(robot, scene, engine=False)
+    except TypeError:  # a checkout from before the engine: coal is its only path
+        return CollisionWorld(robot, scene)
+
+
+def measure(engine: bool = True) -> dict[str, Any]:
     robot = taplan.Robot.teleavatar()
-    world = CollisionWorld(robot, load_scene(SCENE))
+    world = _world(robot, engine)
     rng = np.random.default_rng(25)
     lim = robot.planning_limits
     clear = []
@@ -59,10 +95,11 @@ def measure() -> dict[str, dict[str, float]]:
         q = np.clip(q, lim.lower, lim.upper)
         if world.min_distance(q)[0] > 0.0:
             clear.append((q,))
-    out = {
+    out: dict[str, Any] = {
         "bodies": {"count": float(len(world.bodies)), "self_pairs": float(len(world.self_pairs))},
-        "distances": _stats(_times(lambda q: world.distances(q), clear)),
-        "min_distance": _stats(_times(lambda q: world.min_distance(q), clear)),
+        "distances": _times(lambda q: world.distances(q), clear),
+        "distances_cutoff": _times(lambda q: world.distances(q, cutoff=CUTOFF), clear),
+        "min_distance": _times(lambda q: world.min_distance(q), clear),
     }
     ik = DifferentialIK(robot, dt=0.01, scene=world)
     targets = {}
@@ -70,17 +107,36 @@ def measure() -> dict[str, dict[str, float]]:
         T = robot.frame_pose(robot.home, frame)
         T[:3, 3] += [0.0, 0.0, -0.10]
         targets[frame] = T
-    steps = []
-    for _ in range(4):  # consecutive steps as in a control loop, each run from home (the first run warms up)
+    wall, cpu = [], []
+    for run in range(4):  # consecutive steps as in a control loop, each run from home (the first run warms up)
         ik.reset(robot.home)
-        run = []
         for _ in range(300):
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             ik.step(targets)
-            run.append(time.perf_counter() - t0)
-        steps.append(run)
-    out["ik_step"] = _stats(np.array(steps[1:]).ravel() * 1e6)
+            if run:
+                wall.append(time.perf_counter() - t0)
+                cpu.append(time.process_time() - c0)
+    out["ik_step"] = _stats(np.array(wall) * 1e6, np.array(cpu) * 1e6)
     return out
+
+
+def baseline(checkout: str) -> dict[str, Any]:
+    """:func:`measure` of another checkout's taplan (this script in a subprocess with it on ``PYTHONPATH``)."""
+    env = dict(os.environ, PYTHONPATH=str(Path(checkout).resolve()))
+    done = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve()), "--measure-only"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=str(Path(checkout).resolve()),
+    )
+    commit = subprocess.run(
+        ["git", "-C", checkout, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    result["commit"] = commit
+    return result
 
 
 def planning(count: int) -> dict[str, dict[str, float]]:
@@ -102,15 +158,55 @@ def planning(count: int) -> dict[str, dict[str, float]]:
     return out
 
 
+def _versions(results: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    versions = [("taplan", results["taplan"]), ("coal per pair (engine=False)", results["coal"])]
+    if "baseline" in results:
+        versions.append((f"baseline {results['baseline'].get('commit', '')}", results["baseline"]))
+        versions.append(("taplan, again after the baseline", results["taplan_again"]))
+    return versions
+
+
+def _rows(versions: list[tuple[str, dict[str, Any]]]) -> list[list[str]]:
+    """One row per query and version: wall median / p95, CPU median / p95, queries per second."""
+    rows = []
+    for query in QUERIES:
+        for name, res in versions:
+            s = res[query]
+            rows.append(
+                [
+                    LABELS[query],
+                    name,
+                    f"{int(res['bodies']['count'])} / {int(res['bodies']['self_pairs'])}",
+                    f"{s['median_us']:.0f}",
+                    f"{s['p95_us']:.0f}",
+                    f"{s['cpu_median_us']:.0f}",
+                    f"{s['cpu_p95_us']:.0f}",
+                    f"{s['per_second']:.0f}",
+                ]
+            )
+    return rows
+
+
+HEADER = ["query", "version", "bodies / self pairs", "median [µs]", "p95 [µs]", "CPU median [µs]", "CPU p95 [µs]"]
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-save", action="store_true")
     parser.add_argument("--quick", action="store_true", help="10 planning problems")
     parser.add_argument("--planning", type=int, default=20, help="planning problems (0: none)")
+    parser.add_argument("--baseline", metavar="CHECKOUT", help="also measure this checkout's taplan (subprocess)")
+    parser.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)  # the baseline's side
     args = parser.parse_args(argv)
+    if args.measure_only:
+        print(json.dumps(measure()))
+        return
     if args.quick:
         args.planning = min(args.planning, 10)
-    results = measure()
+    results: dict[str, Any] = {"taplan": measure(), "coal": measure(engine=False)}
+    if args.baseline:
+        results["baseline"] = baseline(args.baseline)
+        results["taplan_again"] = measure()  # after the baseline: the load may have changed meanwhile
     if args.planning:
         results["planning"] = planning(args.planning)
         for family, row in results["planning"].items():
@@ -118,26 +214,22 @@ def main(argv: list[str] | None = None) -> None:
                 f"planning {family:10s} {int(row['solved'])}/{int(row['problems'])} solved, "
                 f"mean {row['seconds'] / row['problems']:.2f} s"
             )
-    rows = [
-        ("distances (with Jacobians)", results["distances"], 1e6 / results["distances"]["median_us"]),
-        ("min_distance", results["min_distance"], 1e6 / results["min_distance"]["median_us"]),
-        ("IK step, scene + arm-arm avoidance", results["ik_step"], 1e6 / results["ik_step"]["median_us"]),
-    ]
-    b = results["bodies"]
-    print(f"bodies {int(b['count'])}, self pairs checked {int(b['self_pairs'])}")
-    for name, s, rate in rows:
-        print(f"{name:38s} median {s['median_us']:8.1f} us  p95 {s['p95_us']:8.1f} us  ({rate:8.0f} /s)")
+    rows = _rows(_versions(results))
+    for row in rows:
+        print(
+            f"{row[0]:40s} {row[1]:32s} {row[2]:>8s}  median {row[3]:>6s} us  p95 {row[4]:>6s}  "
+            f"CPU {row[5]:>6s} / {row[6]:>6s}  ({row[7]:>6s} /s)"
+        )
     if not args.no_save:
         from benchmarks import _harness
 
-        table = _harness.markdown_table(
-            ["query", "median [µs]", "p95 [µs]", "per second"],
-            [[n, f"{s['median_us']:.1f}", f"{s['p95_us']:.1f}", f"{r:.0f}"] for n, s, r in rows],
-        )
         text = (
             "## Collision bodies: distance queries and IK step (taplan.scene, table scene)\n\n"
-            f"{int(b['count'])} bodies, {int(b['self_pairs'])} self pairs checked. `python -m benchmarks.bench_bodies`"
-            "\n\n" + table
+            "`python -m benchmarks.bench_bodies"
+            + (" --baseline <checkout of " + results["baseline"].get("commit", "") + ">" if args.baseline else "")
+            + "`: per call after a warm-up, 200 seeded clear configurations (IK: 900 consecutive steps); wall "
+            "clock and CPU time (shared, loaded machine: CPU time is the steadier figure).\n\n"
+            + _harness.markdown_table(HEADER + ["per second"], rows)
         )
         if "planning" in results:
             text += "\n\n" + _harness.markdown_table(

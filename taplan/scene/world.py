@@ -13,6 +13,7 @@ carried by their links is ``∂d/∂q = n · (J_a(p_a) − J_b(p_b))``, with the
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -226,6 +227,14 @@ class CollisionWorld:
             geometry = coal.Capsule(b.radius, length) if length > 1e-9 else coal.Sphere(b.radius)
             self._body_geometry.append((geometry, _segment_frame(b.start, b.end)))
         self.reach = self._reach()
+        i_idx, j_idx = self._self_index
+        self._self_constants = (  # per self pair: radii, travel rows and the joints carrying its members
+            self._radius[i_idx],
+            self._radius[j_idx],
+            self._body_reach[i_idx] + self._body_reach[j_idx],
+            self._body_joint[i_idx],
+            self._body_joint[j_idx],
+        )
         self._kernel: Any = False  # the compiled end point kernel of these bodies: looked up on first use
 
     # ----------------------------------------------------------------------------------------------- helpers
@@ -281,6 +290,8 @@ class CollisionWorld:
         self._solid_index = np.array([k for k, item in enumerate(self._items) if not item.halfspace], dtype=int)
         for item in self._items:
             item.center = item.pose[:3, 3]
+        movers = [self.bodies[k].name for k in self._movers]
+        self._obstacle_names = [[(body, item.name) for body in movers] for item in self._items]
         self._attached = []
         for a in self.scene.attached.values():
             frame = self.robot.frame_id(a.frame)
@@ -484,7 +495,7 @@ class CollisionWorld:
         the WORLD-frame joint Jacobians ``J`` (6, nv) of the configuration (a point's velocity is ``v + ω × p``).
         Both None: no Jacobians."""
         nv = self.model.nv
-        names = tuple(name for part in parts for name in part.names)
+        names = tuple(itertools.chain.from_iterable(part.names for part in parts))
         count = len(names)
 
         def column(field: str, shape: tuple[int, ...], dtype: type = float, missing: float = 0.0) -> np.ndarray:
@@ -499,23 +510,26 @@ class CollisionWorld:
         rows = None
         if J is not None or JE is not None:
             rows = np.zeros((count, nv))
-            for side, point, sign in (("a", point_a, 1.0), ("b", point_b, -1.0)):
-                moving = column("owner_" + side, (), int).astype(int) > 0
-                if JE is not None:  # robot bodies' witnesses: from their segments' end points
-                    body = column("body_" + side, (), int, -1).astype(int)
-                    on_body = moving & (body >= 0)
-                    if np.any(on_body):
-                        k, n, at = body[on_body], normal[on_body], column("s_" + side, ())[on_body]
-                        j0 = np.einsum("pk,pkv->pv", n, JE[k, 0])
-                        j1 = np.einsum("pk,pkv->pv", n, JE[k, 1])
-                        rows[on_body] += sign * (j0 + at[:, None] * (j1 - j0))
-                    moving &= body < 0
+            body_a, body_b = column("body_a", (), int, -1).astype(int), column("body_b", (), int, -1).astype(int)
+            if JE is not None and count:
+                # robot bodies' witnesses: each row is n · Σ coefficient · J(end point) over both members' ends
+                s_a, s_b = column("s_a", ()), column("s_b", ())
+                on_a, on_b = body_a >= 0, body_b >= 0
+                ends = np.column_stack([2 * body_a, 2 * body_a + 1, 2 * body_b, 2 * body_b + 1])
+                weight = np.column_stack([(1.0 - s_a) * on_a, s_a * on_a, (s_b - 1.0) * on_b, -s_b * on_b])
+                terms = (weight[:, :, None] * normal[:, None, :]).reshape(count, 1, 12)
+                gathered = JE.reshape(-1, 3, nv)[np.maximum(ends, 0)].reshape(count, 12, nv)
+                rows = (terms @ gathered)[:, 0]
+            else:
+                body_a = body_b = np.full(count, -1)
+            for side, point, sign, body in (("a", point_a, 1.0, body_a), ("b", point_b, -1.0, body_b)):
+                owner = column("owner_" + side, (), int).astype(int)
+                moving = (owner > 0) & (body < 0)  # not a robot body (attached objects), or no end-point Jacobians
                 if np.any(moving):
                     assert J is not None, "members that are not robot bodies need the joint Jacobians"
-                    owner = column("owner_" + side, (), int).astype(int)[moving]
                     n = normal[moving]
                     row = n @ J[:3] + np.cross(point[moving], n) @ J[3:]
-                    rows[moving] += sign * row * self._support[owner]
+                    rows[moving] += sign * row * self._support[owner[moving]]
         return Distances(names, distance, point_a, point_b, normal, rows, travel)
 
     def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> list[_Pairs]:
@@ -529,14 +543,20 @@ class CollisionWorld:
         s, t = s.reshape(N, S), t.reshape(N, S)
         delta = pa - pb
         norm = np.linalg.norm(delta, axis=1)
-        d = (norm - np.tile(self._radius[i_idx] + self._radius[j_idx], N)).reshape(N, S)
+        r_i, r_j, travel, owner_i, owner_j = self._self_constants
+        d = norm.reshape(N, S) - (r_i + r_j)
         normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
         normal = normal.reshape(N, S, 3)
-        pa = pa.reshape(N, S, 3) - self._radius[i_idx][None, :, None] * normal
-        pb = pb.reshape(N, S, 3) + self._radius[j_idx][None, :, None] * normal
-        travel = self._body_reach[i_idx] + self._body_reach[j_idx]
+        pa = pa.reshape(N, S, 3) - r_i[:, None] * normal
+        pb = pb.reshape(N, S, 3) + r_j[:, None] * normal
         out = []
         for n in range(N):
+            if cutoff == math.inf:  # every pair: no gathering
+                names = list(self._self_names)
+                out.append(
+                    _Pairs(names, d[n], pa[n], pb[n], normal[n], owner_i, owner_j, travel, i_idx, s[n], j_idx, t[n])
+                )
+                continue
             keep = np.flatnonzero(d[n] <= cutoff)
             out.append(
                 _Pairs(
@@ -545,8 +565,8 @@ class CollisionWorld:
                     pa[n, keep],
                     pb[n, keep],
                     normal[n, keep],
-                    self._body_joint[i_idx[keep]],
-                    self._body_joint[j_idx[keep]],
+                    owner_i[keep],
+                    owner_j[keep],
                     travel[keep],
                     i_idx[keep],
                     s[n, keep],
@@ -593,49 +613,41 @@ class CollisionWorld:
         transforms: dict[int, Any] = {}
         if solid.size:
             center = self._item_center[solid]  # (S, 3)
-            axis = s1 - s0
-            length2 = np.einsum("bk,bk->b", axis, axis)
-            t = np.einsum("sbk,bk->sb", center[:, None, :] - s0[None], axis) / np.maximum(length2, 1e-18)
-            t = np.clip(np.where(length2 < 1e-18, 0.0, t), 0.0, 1.0)
-            nearest = s0[None] + t[:, :, None] * axis[None]
-            gap = (
-                np.linalg.norm(nearest - center[:, None, :], axis=2) - radius[None] - self._item_radius[solid][:, None]
-            )
-            # the capsule's box in the item's frame against the item's own box: another lower bound
-            R, h = self._item_rotation[solid], self._item_half[solid][:, None, :]
-            a0 = np.einsum("sji,sbj->sbi", R, s0[None] - center[:, None, :])
-            a1 = np.einsum("sji,sbj->sbi", R, s1[None] - center[:, None, :])
-            lo = np.minimum(a0, a1) - radius[None, :, None]
-            hi = np.maximum(a0, a1) + radius[None, :, None]
-            apart = np.linalg.norm(np.maximum(np.maximum(lo - h, -h - hi), 0.0), axis=2)
-            gap = np.where(apart > 0.0, np.maximum(gap, apart), gap)  # a bound of positive distances only
+            # the segments in each item's frame, as rows: Rᵀ (x − c) = (x − c) R
+            R = self._item_rotation[solid]
+            a0 = (s0[None] - center[:, None, :]) @ R
+            a1 = (s1[None] - center[:, None, :]) @ R
+            if cutoff < math.inf or bound_beyond < math.inf:
+                gap = self._solid_bounds(a0, a1, radius, solid)
+                pick = (gap <= cutoff) & (gap <= bound_beyond)
+            else:  # every pair exact: no bound needed
+                gap = np.full(a0.shape[:2], -math.inf)
+                pick = np.ones(a0.shape[:2], dtype=bool)
             d[solid] = gap
-            mid = (s0 + s1) / 2
-            away = mid[None] - center[:, None, :]
-            pa[solid] = mid[None]
-            pb[solid] = np.broadcast_to(center[:, None, :], away.shape)
-            n[solid] = away / np.maximum(np.linalg.norm(away, axis=2), 1e-12)[:, :, None]
-            s_rows, b_cols = np.nonzero((gap <= cutoff) & (gap <= bound_beyond))
+            if not pick.all():  # the bounds' witnesses: the segment's middle and the item's centre
+                mid = (s0 + s1) / 2
+                away = mid[None] - center[:, None, :]
+                pa[solid] = mid[None]
+                pb[solid] = np.broadcast_to(center[:, None, :], away.shape)
+                n[solid] = away / np.maximum(np.linalg.norm(away, axis=2), 1e-12)[:, :, None]
+            s_rows, b_cols = np.nonzero(pick)
             m_rows = solid[s_rows]
             closed = self._item_kind[m_rows] >= 0 if self.use_engine else np.zeros(len(m_rows), dtype=bool)
-            if closed.any():  # boxes, spheres, capsules, cylinders: closed forms for all these pairs at once
-                m, b = m_rows[closed], b_cols[closed]
-                R, c = self._item_rotation[m], self._item_center[m]
-                e0 = np.einsum("pji,pj->pi", R, s0[b] - c)  # in the obstacle's frame: Rᵀ (x − c)
-                e1 = np.einsum("pji,pj->pi", R, s1[b] - c)
-                size, core = self._item_size[m], self._item_core[m]
-                s_k, d_k, pa_k, pb_k, n_k, inside = solid_pairs(self._item_kind[m], size, core, e0, e1, radius[b])
-                d[m, b], along[m, b] = d_k, s_k
-                pa[m, b] = np.einsum("pij,pj->pi", R, pa_k) + c
-                pb[m, b] = np.einsum("pij,pj->pi", R, pb_k) + c
-                n[m, b] = np.einsum("pij,pj->pi", R, n_k)
-                # the axis touches or enters the solid: a penetration depth, coal's EPA (as the engine does)
-                coal_pairs = [(int(i), int(j), self._depth_request) for i, j in zip(m[inside], b[inside], strict=True)]
-            else:
-                coal_pairs = []
-            coal_pairs += [
+            coal_pairs = [
                 (int(i), int(j), self._request) for i, j in zip(m_rows[~closed], b_cols[~closed], strict=True)
             ]
+            if closed.any():  # boxes, spheres, capsules, cylinders: closed forms for all these pairs at once
+                m, b = m_rows[closed], b_cols[closed]
+                e0, e1 = a0[s_rows[closed], b], a1[s_rows[closed], b]
+                size, core = self._item_size[m], self._item_core[m]
+                s_k, d_k, pa_k, pb_k, n_k, inside = solid_pairs(self._item_kind[m], size, core, e0, e1, radius[b])
+                Rt, c = self._item_rotation[m].transpose(0, 2, 1), self._item_center[m]
+                d[m, b], along[m, b] = d_k, s_k
+                pa[m, b] = (pa_k[:, None, :] @ Rt)[:, 0] + c  # back to the root frame: x R_itemᵀ + c
+                pb[m, b] = (pb_k[:, None, :] @ Rt)[:, 0] + c
+                n[m, b] = (n_k[:, None, :] @ Rt)[:, 0]
+                # the axis touches or enters the solid: a penetration depth, coal's EPA (as the engine does)
+                coal_pairs += [(int(i), int(j), self._depth_request) for i, j in zip(m[inside], b[inside], strict=True)]
             for m_k, b_col, request in coal_pairs:
                 item, body = items[m_k], int(movers[b_col])
                 if body not in transforms:  # the capsule's frame from its end points (any turn about its axis)
@@ -646,7 +658,8 @@ class CollisionWorld:
                 d[m_k, b_col], pa[m_k, b_col], pb[m_k, b_col], n[m_k, b_col] = d_k, pa_k, pb_k, n_k
                 along[m_k, b_col] = _parameter(pa_k + radius[b_col] * n_k, s0[b_col], s1[b_col])
         rows, cols = np.nonzero(d <= cutoff)
-        names = [(self.bodies[movers[c]].name, items[r].name) for r, c in zip(rows, cols, strict=True)]
+        table = self._obstacle_names
+        names = [table[r][c] for r, c in zip(rows.tolist(), cols.tolist(), strict=True)]
         paired = movers[cols]
         part = _Pairs(
             names,
@@ -663,6 +676,22 @@ class CollisionWorld:
             np.zeros(len(rows)),
         )
         return part
+
+    def _solid_bounds(self, a0: np.ndarray, a1: np.ndarray, radius: np.ndarray, solid: np.ndarray) -> np.ndarray:
+        """Lower bounds (S, Bm) [m] of the moving capsules' (segments ``a0``-``a1`` in each item's frame, (S, Bm, 3))
+        distances to the solid items: the segment's distance to the item's centre minus both bounding radii, and
+        where positive the gap between the capsule's box and the item's box (both in the item's frame)."""
+        axis = a1 - a0
+        length2 = np.sum(axis * axis, axis=2)
+        t = -np.sum(a0 * axis, axis=2) / np.maximum(length2, 1e-18)
+        t = np.clip(np.where(length2 < 1e-18, 0.0, t), 0.0, 1.0)
+        nearest = a0 + t[:, :, None] * axis  # the segment's point nearest the item's centre (its origin)
+        gap = np.linalg.norm(nearest, axis=2) - radius[None] - self._item_radius[solid][:, None]
+        h = self._item_half[solid][:, None, :]
+        lo = np.minimum(a0, a1) - radius[None, :, None]
+        hi = np.maximum(a0, a1) + radius[None, :, None]
+        apart = np.linalg.norm(np.maximum(np.maximum(lo - h, -h - hi), 0.0), axis=2)
+        return np.where(apart > 0.0, np.maximum(gap, apart), gap)  # the box bound is one of positive distances only
 
     def _field_distances(
         self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float
