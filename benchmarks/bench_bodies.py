@@ -158,11 +158,18 @@ def planning(count: int) -> dict[str, dict[str, float]]:
     return out
 
 
+def _merged(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Several rounds of :func:`measure` as one: per query and statistic the median over the rounds."""
+    out: dict[str, Any] = {"bodies": runs[0]["bodies"]}
+    for query in QUERIES:
+        out[query] = {key: float(np.median([run[query][key] for run in runs])) for key in runs[0][query]}
+    return out
+
+
 def _versions(results: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
     versions = [("taplan", results["taplan"]), ("coal per pair (engine=False)", results["coal"])]
     if "baseline" in results:
         versions.append((f"baseline {results['baseline'].get('commit', '')}", results["baseline"]))
-        versions.append(("taplan, again after the baseline", results["taplan_again"]))
     return versions
 
 
@@ -196,6 +203,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="10 planning problems")
     parser.add_argument("--planning", type=int, default=20, help="planning problems (0: none)")
     parser.add_argument("--baseline", metavar="CHECKOUT", help="also measure this checkout's taplan (subprocess)")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds with --baseline")
     parser.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)  # the baseline's side
     args = parser.parse_args(argv)
     if args.measure_only:
@@ -203,10 +211,24 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.quick:
         args.planning = min(args.planning, 10)
-    results: dict[str, Any] = {"taplan": measure(), "coal": measure(engine=False)}
-    if args.baseline:
-        results["baseline"] = baseline(args.baseline)
-        results["taplan_again"] = measure()  # after the baseline: the load may have changed meanwhile
+    results: dict[str, Any] = {"coal": measure(engine=False)}
+    if args.baseline:  # alternate rounds: the load of a shared machine drifts between them
+        ours, theirs = [], []
+        for _ in range(args.rounds):
+            theirs.append(baseline(args.baseline))
+            ours.append(measure())
+        results["taplan"], results["baseline"] = _merged(ours), _merged(theirs)
+        results["baseline"]["commit"] = theirs[0]["commit"]
+        results["ratio"] = {
+            query: {
+                clock: float(np.median([o[query][clock] / t[query][clock] for o, t in zip(ours, theirs, strict=True)]))
+                for clock in ("median_us", "cpu_median_us")
+            }
+            for query in QUERIES
+        }
+        results["rounds"] = args.rounds
+    else:
+        results["taplan"] = measure()
     if args.planning:
         results["planning"] = planning(args.planning)
         for family, row in results["planning"].items():
@@ -220,6 +242,11 @@ def main(argv: list[str] | None = None) -> None:
             f"{row[0]:40s} {row[1]:32s} {row[2]:>8s}  median {row[3]:>6s} us  p95 {row[4]:>6s}  "
             f"CPU {row[5]:>6s} / {row[6]:>6s}  ({row[7]:>6s} /s)"
         )
+    ratio_rows = [
+        [LABELS[q], f"{r['median_us']:.2f}", f"{r['cpu_median_us']:.2f}"] for q, r in results.get("ratio", {}).items()
+    ]
+    for row in ratio_rows:
+        print(f"taplan / baseline  {row[0]:40s} wall {row[1]}x  CPU {row[2]}x")
     if not args.no_save:
         from benchmarks import _harness
 
@@ -231,6 +258,12 @@ def main(argv: list[str] | None = None) -> None:
             "clock and CPU time (shared, loaded machine: CPU time is the steadier figure).\n\n"
             + _harness.markdown_table(HEADER + ["per second"], rows)
         )
+        if ratio_rows:
+            text += (
+                f"\n\ntaplan / baseline {results['baseline']['commit']}, median over {results['rounds']} alternating "
+                "rounds of the per-round ratio of medians:\n\n"
+                + _harness.markdown_table(["query", "wall", "CPU"], ratio_rows)
+            )
         if "planning" in results:
             text += "\n\n" + _harness.markdown_table(
                 ["family", "solved", "mean time [s]"],

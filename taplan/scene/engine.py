@@ -578,7 +578,7 @@ class _Kinematics:
             ends[n, :, 0] = np.einsum("bij,bj->bi", R, world._body_start) + o
             ends[n, :, 1] = np.einsum("bij,bj->bi", R, world._body_end) + o
             if rows is not None:
-                J = data.J  # WORLD frame: a point's velocity is v + ω × p
+                J = np.asarray(data.J).reshape(6, nv)  # WORLD frame: a point's velocity is v + ω × p (nv = 1: 1-D)
                 for k in range(2):
                     p = ends[n, :, k]  # (B, 3)
                     skew = np.zeros((B, 3, 3))

@@ -351,7 +351,10 @@ class CollisionWorld:
         parts += self._field_distances(starts, ends, cutoff, bound_beyond)
         if attached:
             parts.append(self._attached_distances(starts, ends, cutoff, bound_beyond))
-        return self._joined(parts, data.J if jacobian and (kernel is None or attached) else None, JE)
+        J = (
+            np.asarray(data.J).reshape(6, model.nv) if jacobian and (kernel is None or attached) else None
+        )  # nv = 1: 1-D
+        return self._joined(parts, J, JE)
 
     def _end_point_kernel(self) -> Any:
         """The compiled kernel ``q -> body end points, their Jacobians`` (:mod:`taplan.scene.engine`), or None
@@ -495,42 +498,46 @@ class CollisionWorld:
         the WORLD-frame joint Jacobians ``J`` (6, nv) of the configuration (a point's velocity is ``v + ω × p``).
         Both None: no Jacobians."""
         nv = self.model.nv
+        parts = [part for part in parts if len(part.names)]
+        if not parts:
+            empty = np.zeros((0, 3))
+            rows = None if J is None and JE is None else np.zeros((0, nv))
+            return Distances((), np.zeros(0), empty, empty, empty, rows, np.zeros((0, nv)))
+
+        def column(field: str) -> np.ndarray:
+            values = [getattr(part, field) for part in parts]
+            return values[0] if len(values) == 1 else np.concatenate(values)
+
         names = tuple(itertools.chain.from_iterable(part.names for part in parts))
-        count = len(names)
-
-        def column(field: str, shape: tuple[int, ...], dtype: type = float, missing: float = 0.0) -> np.ndarray:
-            values = [
-                getattr(part, field) if getattr(part, field) is not None else np.full(len(part.names), missing)
-                for part in parts
-            ]
-            return np.concatenate(values).reshape(count, *shape) if values else np.zeros((0, *shape), dtype=dtype)
-
-        distance, travel = column("distance", ()), column("travel", (nv,))
-        point_a, point_b, normal = (column(field, (3,)) for field in ("point_a", "point_b", "normal"))
+        distance, travel = column("distance"), column("travel")
+        point_a, point_b, normal = column("point_a"), column("point_b"), column("normal")
         rows = None
         if J is not None or JE is not None:
-            rows = np.zeros((count, nv))
-            body_a, body_b = column("body_a", (), int, -1).astype(int), column("body_b", (), int, -1).astype(int)
-            if JE is not None and count:
-                # robot bodies' witnesses: each row is n · Σ coefficient · J(end point) over both members' ends
-                s_a, s_b = column("s_a", ()), column("s_b", ())
-                on_a, on_b = body_a >= 0, body_b >= 0
-                ends = np.column_stack([2 * body_a, 2 * body_a + 1, 2 * body_b, 2 * body_b + 1])
-                weight = np.column_stack([(1.0 - s_a) * on_a, s_a * on_a, (s_b - 1.0) * on_b, -s_b * on_b])
-                terms = (weight[:, :, None] * normal[:, None, :]).reshape(count, 1, 12)
-                gathered = JE.reshape(-1, 3, nv)[np.maximum(ends, 0)].reshape(count, 12, nv)
-                rows = (terms @ gathered)[:, 0]
-            else:
-                body_a = body_b = np.full(count, -1)
-            for side, point, sign, body in (("a", point_a, 1.0, body_a), ("b", point_b, -1.0, body_b)):
-                owner = column("owner_" + side, (), int).astype(int)
-                moving = (owner > 0) & (body < 0)  # not a robot body (attached objects), or no end-point Jacobians
-                if np.any(moving):
-                    assert J is not None, "members that are not robot bodies need the joint Jacobians"
-                    n = normal[moving]
-                    row = n @ J[:3] + np.cross(point[moving], n) @ J[3:]
-                    rows[moving] += sign * row * self._support[owner[moving]]
+            rows = np.concatenate([self._part_rows(part, J, JE) for part in parts])
         return Distances(names, distance, point_a, point_b, normal, rows, travel)
+
+    def _part_rows(self, part: _Pairs, J: np.ndarray | None, JE: np.ndarray | None) -> np.ndarray:
+        """The Jacobian rows of one part (see :meth:`_joined`)."""
+        nv, count = self.model.nv, len(part.names)
+        if JE is not None and part.body_a is not None:
+            # robot bodies' witnesses: each row is n · Σ weight · J(end point) over both members' segment ends
+            body_a, body_b, s_a, s_b = part.body_a, part.body_b, part.s_a, part.s_b
+            on_a, on_b = body_a >= 0, body_b >= 0
+            ends = np.stack([2 * body_a, 2 * body_a + 1, 2 * body_b, 2 * body_b + 1], axis=1)
+            weight = np.stack([(1.0 - s_a) * on_a, s_a * on_a, (s_b - 1.0) * on_b, -s_b * on_b], axis=1)
+            terms = (weight[:, :, None] * part.normal[:, None, :]).reshape(count, 1, 12)
+            gathered = JE.reshape(-1, 3, nv)[np.maximum(ends, 0)].reshape(count, 12, nv)
+            return (terms @ gathered)[:, 0]
+        # from the joint Jacobians: attached objects' witnesses, or no end-point Jacobians
+        assert J is not None, "members that are not robot bodies need the joint Jacobians"
+        rows = np.zeros((count, nv))
+        for owner, point, sign in ((part.owner_a, part.point_a, 1.0), (part.owner_b, part.point_b, -1.0)):
+            moving = owner > 0
+            if np.any(moving):
+                n = part.normal[moving]
+                row = n @ J[:3] + np.cross(point[moving], n) @ J[3:]
+                rows[moving] += sign * row * self._support[owner[moving]]
+        return rows
 
     def _self_distances(self, starts: np.ndarray, ends: np.ndarray, cutoff: float) -> list[_Pairs]:
         """Robot body pairs (capsules) in closed form, for N configurations (``starts``, ``ends``: (N, B, 3))."""
@@ -618,13 +625,14 @@ class CollisionWorld:
             a0 = (s0[None] - center[:, None, :]) @ R
             a1 = (s1[None] - center[:, None, :]) @ R
             if cutoff < math.inf or bound_beyond < math.inf:
-                gap = self._solid_bounds(a0, a1, radius, solid)
+                # the bounds are reported only for pairs beyond bound_beyond: otherwise the cheaper one does
+                gap = self._solid_bounds(a0, a1, radius, solid, boxes_only=bound_beyond == math.inf)
                 pick = (gap <= cutoff) & (gap <= bound_beyond)
             else:  # every pair exact: no bound needed
                 gap = np.full(a0.shape[:2], -math.inf)
                 pick = np.ones(a0.shape[:2], dtype=bool)
             d[solid] = gap
-            if not pick.all():  # the bounds' witnesses: the segment's middle and the item's centre
+            if bound_beyond < math.inf and not pick.all():  # reported bounds' witnesses: middle and centre
                 mid = (s0 + s1) / 2
                 away = mid[None] - center[:, None, :]
                 pa[solid] = mid[None]
@@ -677,20 +685,25 @@ class CollisionWorld:
         )
         return part
 
-    def _solid_bounds(self, a0: np.ndarray, a1: np.ndarray, radius: np.ndarray, solid: np.ndarray) -> np.ndarray:
+    def _solid_bounds(
+        self, a0: np.ndarray, a1: np.ndarray, radius: np.ndarray, solid: np.ndarray, boxes_only: bool = False
+    ) -> np.ndarray:
         """Lower bounds (S, Bm) [m] of the moving capsules' (segments ``a0``-``a1`` in each item's frame, (S, Bm, 3))
         distances to the solid items: the segment's distance to the item's centre minus both bounding radii, and
-        where positive the gap between the capsule's box and the item's box (both in the item's frame)."""
+        where positive the gap between the capsule's box and the item's box (both in the item's frame).
+        ``boxes_only``: the boxes' gap alone (a weaker bound, enough to skip pairs beyond a cutoff)."""
+        h = self._item_half[solid][:, None, :]
+        lo = np.minimum(a0, a1) - radius[None, :, None]
+        hi = np.maximum(a0, a1) + radius[None, :, None]
+        apart = np.linalg.norm(np.maximum(np.maximum(lo - h, -h - hi), 0.0), axis=2)
+        if boxes_only:
+            return apart
         axis = a1 - a0
         length2 = np.sum(axis * axis, axis=2)
         t = -np.sum(a0 * axis, axis=2) / np.maximum(length2, 1e-18)
         t = np.clip(np.where(length2 < 1e-18, 0.0, t), 0.0, 1.0)
         nearest = a0 + t[:, :, None] * axis  # the segment's point nearest the item's centre (its origin)
         gap = np.linalg.norm(nearest, axis=2) - radius[None] - self._item_radius[solid][:, None]
-        h = self._item_half[solid][:, None, :]
-        lo = np.minimum(a0, a1) - radius[None, :, None]
-        hi = np.maximum(a0, a1) + radius[None, :, None]
-        apart = np.linalg.norm(np.maximum(np.maximum(lo - h, -h - hi), 0.0), axis=2)
         return np.where(apart > 0.0, np.maximum(gap, apart), gap)  # the box bound is one of positive distances only
 
     def _field_distances(
