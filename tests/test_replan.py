@@ -144,3 +144,43 @@ def test_replans_around_an_obstacle_moving_into_the_path_in_the_simulator(robot)
     assert clearance >= MARGIN / 4 - 1e-9
     # without re-planning, the first plan would have hit the ball
     assert min(_ball_distance(world, first(s)) for s in np.linspace(0, first.duration, 200)) < 0.0
+
+
+def test_a_plan_ready_after_its_hand_over_was_read_is_not_used(robot) -> None:
+    """A control loop on another thread read states past the hand-over while the plan was computed: the update is
+    "late", the replanner brakes from the latest state read (no state already read changes) and the next update
+    plans from the stop; the states read stay continuous."""
+    scene, start, goal = _problem(robot)
+    base = robot.planning_limits
+    limits = base.replace(velocity=base.velocity * 0.1)
+    replanner = Replanner(robot, scene, start, 0.0, limits=limits, latency=0.2, max_time=2.0)
+    replanner.set_goal(goal)
+    assert replanner.update(0.0).action == "replanned"
+    first = replanner.trajectory
+    read = 0.25 * first.duration  # the loop is already here
+    before = replanner.state(read)
+    passed = [first(s * first.duration) for s in np.linspace(0.0, 0.4, 8)]
+    for fraction in np.linspace(0.6, 0.95, 8):
+        ball = robot.frame_pose(first(fraction * first.duration), "right_tcp")[:3, 3]
+        trial = CollisionWorld(robot, _with_ball(scene, ball))
+        if _ball_distance(trial, goal) > 0.03 and min(_ball_distance(trial, q) for q in passed) > 0.02:
+            break
+    else:
+        pytest.fail("no place on the path for the ball")
+    scene.put("ball", Sphere(BALL), (ball.tolist(), [0, 0, 0, 1]))
+    event = replanner.update(0.1)  # the update's time: the hand-over at 0.3 s was read long ago
+    assert event.action == "late" and "past its hand-over" in event.reason, event.reason
+    for x, y in zip(before, replanner.state(read), strict=True):  # the state read last stays as it was
+        np.testing.assert_allclose(x, y, atol=1e-9)
+    assert np.abs(before[1]).max() > 0.05  # braking from a moving state [rad/s]
+    event = replanner.update(read + 0.01)
+    assert event.action == "replanned", event.reason
+    times = np.arange(read, replanner.end_time + 0.1, 0.01)
+    states = [replanner.state(t) for t in times]
+    v = np.array([s[1] for s in states])
+    a = np.array([s[2] for s in states])
+    assert np.all(np.abs(np.diff(v, axis=0)) <= limits.acceleration * 0.01 * (1 + 1e-3) + 1e-9)
+    assert np.all(np.abs(np.diff(a, axis=0)) <= limits.jerk * 0.01 * (1 + 1e-3) + 1e-9)
+    np.testing.assert_allclose(states[-1][0], goal, atol=GOAL_TOL)
+    world = CollisionWorld(robot, scene, engine=False)
+    assert min(_ball_distance(world, s[0]) for s in states[::5]) >= MARGIN / 4 - 1e-6

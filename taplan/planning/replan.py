@@ -16,13 +16,17 @@ simulator's time). The control loop calls :meth:`Replanner.update` with the curr
 
 The returned trajectory is therefore always: the old trajectory up to ``t_switch``, the certified stop, the
 certified plan — continuous to the acceleration, within the planning limits. ``update`` blocks for the planning
-time (bounded by ``max_time`` + 0.2 s): a loop that cannot wait that long passes ``latency`` >= that time, so that
-the hand-over happens after the plan is ready.
+time (bounded by ``max_time`` + 0.2 s): a loop that cannot wait that long calls ``update`` from another thread
+(:meth:`taplan.ros.Runner.follow` does) with ``latency`` >= that time, so that the hand-over happens after the plan
+is ready. :meth:`state` and the hand-over are thread-safe: a new trajectory is installed only if no state after its
+hand-over time has been read yet (else the update is ``"late"`` and the next one tries again from a later time), so
+the states a control loop reads never jump.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -55,7 +59,9 @@ class ReplanEvent:
     Attributes:
         time: The update's time [s] (caller's clock).
         action: ``"kept"`` (the scene changed, the rest of the plan is still certified), ``"replanned"`` (a new
-            plan from the stop at ``switch``), ``"stopped"`` (no plan: the robot stops and holds).
+            plan from the stop at ``switch``), ``"stopped"`` (no plan: the robot stops and holds), ``"late"`` (the
+            plan was ready after its hand-over time had been read by :meth:`Replanner.state`: not installed, the
+            next update re-plans).
         reason: Why (the scene changed and the plan came within the floor, the goal changed, the planner's error).
         switch: When the new motion takes over [s] (``"replanned"`` / ``"stopped"``), else the update's time.
         seconds: Wall time of the update [s].
@@ -117,16 +123,26 @@ class Replanner:
         self.events: list[ReplanEvent] = []
         self._version = scene.version
         self._pending = ""  # why the next update must plan
+        self._lock = threading.Lock()  # state() against a hand-over installed from another thread
+        self._served = -math.inf  # the latest time state() answered for [s]: a hand-over before it is too late
 
     # ------------------------------------------------------------------------------------------------ queries
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The commanded position [rad], velocity [rad/s] and acceleration [rad/s²] at time ``t`` (nq each); after
         the end, the final position at rest."""
-        local = float(np.clip(t - self.t0, 0.0, self.trajectory.duration))
-        if t - self.t0 > self.trajectory.duration:
-            end = self.trajectory(self.trajectory.duration)
+        with self._lock:
+            self._served = max(self._served, float(t))
+            t0, trajectory = self.t0, self.trajectory
+        local = float(np.clip(t - t0, 0.0, trajectory.duration))
+        if t - t0 > trajectory.duration:
+            end = trajectory(trajectory.duration)
             return end, np.zeros_like(end), np.zeros_like(end)
-        return tuple(np.asarray(self.trajectory(local, k), dtype=float) for k in range(3))  # type: ignore[return-value]
+        return tuple(np.asarray(trajectory(local, k), dtype=float) for k in range(3))  # type: ignore[return-value]
+
+    @property
+    def pending(self) -> bool:
+        """True when the next :meth:`update` will plan (a new goal, or a retry after a failed or late plan)."""
+        return bool(self._pending)
 
     @property
     def end_time(self) -> float:
@@ -171,20 +187,23 @@ class Replanner:
         local = max(t - self.t0, 0.0)
         switch = min(local + self.latency, self.trajectory.duration)
         head = sliced(self.trajectory, local, switch) if switch > local + 1e-9 else None
-        stop = self._stop(switch)
         if head is not None:  # the old trajectory runs until the hand-over only if it and the stop are clear
+            stop = self._stop(self.trajectory, switch)
             ahead = concatenated([p for p in (head, stop) if p is not None])
             if not verify_trajectory(self.world, ahead, floor=self.margin / 4).collision_free:
-                switch, head = local, None
-                stop = self._stop(switch)
+                head = None
+        if head is None:  # brake at once, while the plan is computed
+            switch_time, stop = self._brake_now(t)
+            q_stop = np.asarray((stop or self.trajectory)(stop.duration if stop else 0.0), dtype=float)
+        else:
+            switch_time = t + (switch - local)
+            q_stop = np.asarray((stop or self.trajectory)(stop.duration if stop else switch), dtype=float)
         if stop is not None and not verify_trajectory(self.world, stop, floor=0.0).collision_free:
             reason += "; the stop itself is not certified collision-free (the obstacle came too fast)"
-        q_stop = np.asarray((stop or self.trajectory)(stop.duration if stop else switch), dtype=float)
-        pieces = [p for p in (head, stop) if p is not None]
-        when = t + (switch - local)
         if self.goal is None:
-            self._install(t, pieces, q_stop)
-            return ReplanEvent(t, "stopped", f"{reason}; no goal", when, time.perf_counter() - begin)
+            if head is not None and not self._install(t, [head, *([stop] if stop else [])], switch_time):
+                return self._late(t, reason, switch_time, begin)
+            return ReplanEvent(t, "stopped", f"{reason}; no goal", switch_time, time.perf_counter() - begin)
         try:
             plan = plan_motion(
                 self.robot,
@@ -197,23 +216,65 @@ class Replanner:
                 seed=self.seed + len(self.events),
             )
         except TaplanError as exc:
-            self._install(t, pieces, q_stop)
+            if head is not None and not self._install(t, [head, *([stop] if stop else [])], switch_time):
+                return self._late(t, reason, switch_time, begin)
             self._pending = f"{reason}; retrying after: {exc}"
-            return ReplanEvent(t, "stopped", f"{reason}; {exc}", when, time.perf_counter() - begin)
-        self._install(t, [*pieces, plan.trajectory], q_stop)
-        return ReplanEvent(t, "replanned", reason, when, time.perf_counter() - begin, plan)
+            return ReplanEvent(t, "stopped", f"{reason}; {exc}", switch_time, time.perf_counter() - begin)
+        if head is None:
+            self._after_stop(switch_time, stop, plan.trajectory)
+        elif not self._install(t, [head, *([stop] if stop else []), plan.trajectory], switch_time):
+            return self._late(t, reason, switch_time, begin)
+        return ReplanEvent(t, "replanned", reason, switch_time, time.perf_counter() - begin, plan)
 
-    def _stop(self, at: float) -> Trajectory | None:
-        """ruckig's time-optimal stop from the commanded state at ``at`` (trajectory time), or None at rest."""
-        q, v, a = (np.asarray(self.trajectory(at, k), dtype=float) for k in range(3))
+    def _late(self, t: float, reason: str, when: float, begin: float) -> ReplanEvent:
+        """The hand-over at ``when`` was already read from the old trajectory: nothing of the plan is installed, the
+        robot brakes from the latest state read (the old trajectory was not certified beyond the hand-over), the
+        next update plans from there."""
+        self._brake_now(t)
+        self._pending = reason
+        seconds = time.perf_counter() - begin
+        why = f"{reason}; the plan took {seconds:.3f} s, past its hand-over at {when:.3f} s: braking, re-planning"
+        return ReplanEvent(t, "late", why, when, seconds)
+
+    def _stop(self, trajectory: Trajectory, at: float) -> Trajectory | None:
+        """ruckig's time-optimal stop from ``trajectory``'s state at ``at`` (its time), or None at rest."""
+        q, v, a = (np.asarray(trajectory(at, k), dtype=float) for k in range(3))
         if np.abs(v).max() < REST and np.abs(a).max() < REST:
             return None
         target = _stopping_point(q, v, a, self.limits)
         return state_to_state((q, v, a), (target, np.zeros_like(q), np.zeros_like(q)), self.limits)
 
-    def _install(self, t: float, pieces: list[Trajectory], q_end: np.ndarray) -> None:
-        self.t0 = t
-        self.trajectory = concatenated(pieces) if pieces else _hold(q_end, self.robot.joint_names)
+    def _brake_now(self, t: float) -> tuple[float, Trajectory | None]:
+        """Install ruckig's stop from the commanded state at ``t`` or at the latest time :meth:`state` answered for,
+        whichever is later (no state already read changes); (when it starts on the caller's clock, the stop or
+        None at rest, then a hold is installed)."""
+        with self._lock:
+            start = max(t, self._served)
+            local = float(np.clip(start - self.t0, 0.0, self.trajectory.duration))
+            stop = self._stop(self.trajectory, local)
+            q = np.asarray(self.trajectory(local), dtype=float)
+            self.t0, self.trajectory = start, stop if stop is not None else _hold(q, self.robot.joint_names)
+        return start, stop
+
+    def _after_stop(self, start: float, stop: Trajectory | None, plan: Trajectory) -> None:
+        """Install ``plan`` after the ``stop`` installed at ``start``: right after it when the stop is still running
+        (or ended no later than the latest state read), else from the latest state read (the robot rests at the
+        plan's start until then)."""
+        with self._lock:
+            stop_end = start + (stop.duration if stop is not None else 0.0)
+            if stop is not None and self._served <= stop_end + 1e-9:
+                self.t0, self.trajectory = start, concatenated([stop, plan])
+            else:
+                self.t0, self.trajectory = max(self._served, stop_end), plan
+
+    def _install(self, t: float, pieces: list[Trajectory], when: float) -> bool:
+        """Make ``pieces`` (from time ``t``) the trajectory, unless a state after the hand-over ``when`` was read."""
+        trajectory = concatenated(pieces)
+        with self._lock:
+            if self._served > when + 1e-9:
+                return False
+            self.t0, self.trajectory = t, trajectory
+        return True
 
 
 def _hold(q: np.ndarray, names: tuple[str, ...]) -> Trajectory:

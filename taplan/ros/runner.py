@@ -563,6 +563,87 @@ class Runner:
 
         return self._drive(command, f"streamed for {duration:g} s")
 
+    def follow(
+        self,
+        replanner: Any,
+        duration: float,
+        *,
+        updates: Callable[[float], None] | None = None,
+    ) -> RunResult:
+        """Execute a :class:`~taplan.planning.Replanner`'s trajectory while it re-plans, at the arm rate.
+
+        Re-planning in the loop: the replanner's clock is this run's, in seconds from the first command (build it
+        with ``t=0.0`` at the measured position, :meth:`wait_for_state`, and a goal). A planning thread calls
+        ``updates(t)`` (the caller's scene and goal changes: they happen in the thread that plans, never under a
+        running planner) and then ``replanner.update(t)``, once per period; the command loop reads
+        ``replanner.state(t)`` for each command and keeps its rate while a plan is computed. Give the replanner a
+        ``latency`` of at least its ``max_time`` + 0.2 s (the planner's budget tolerance): the hand-over then
+        happens after the plan is ready; a plan that is late is not used (the replanner brakes and plans again).
+        The run ends when the trajectory has ended with nothing left to plan, after ``duration`` [s], or as every
+        run ends (a stall, Ctrl-C, an error in the planning thread: braked to rest).
+
+        Raises:
+            RunError: No joint states, or the replanner's trajectory does not start at the measured position.
+        """
+        import threading
+
+        if not (isinstance(duration, (int, float)) and np.isfinite(duration) and duration > 0):
+            raise InvalidInputError("duration", duration, "a positive time [s]")
+        start_q = self.wait_for_state()
+        first = np.asarray(replanner.state(0.0)[0], dtype=float)
+        offset = np.abs(first - start_q)
+        if offset.max() > self.config.start_tolerance:
+            j = int(np.argmax(offset))
+            raise RunError(
+                f"the replanner starts {offset[j]:.4f} rad from the measured {self.robot.joint_names[j]} "
+                f"(tolerance {self.config.start_tolerance:g} rad): build it at the robot's current state"
+            )
+        self.arm(start_q)
+        stop = threading.Event()
+        begin: list[float] = []  # the clock at the first command: the replanner's time 0
+        busy = threading.Event()  # the planning thread is between updates(t) and the end of replanner.update(t)
+        failures: list[BaseException] = []
+        finished: list[bool] = []  # non-empty once a command after the trajectory's end was sent
+
+        def planning() -> None:
+            while not stop.is_set():
+                busy.set()
+                try:
+                    t = self.clock() - begin[0]
+                    if updates is not None:
+                        updates(t)
+                    replanner.update(t)
+                except Exception as exc:  # noqa: BLE001 (reported by the command loop, which brakes)
+                    failures.append(exc)
+                    return
+                finally:
+                    busy.clear()
+                stop.wait(self.period)
+
+        worker = threading.Thread(target=planning, name="taplan-replanner", daemon=True)
+
+        def command(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+            t = k * self.period
+            if not begin:
+                begin.append(self.clock())
+                worker.start()
+            if failures:
+                raise RunError(f"re-planning failed: {failures[0]}")
+            ended = t > replanner.end_time and not replanner.pending and not busy.is_set()
+            if t > duration or (ended and finished):
+                return None
+            if ended:
+                finished.append(True)  # one command after the end: the final position itself, at rest
+            q, v, a = replanner.state(t)
+            return np.asarray(q, dtype=float), np.asarray(v, dtype=float), np.asarray(a, dtype=float)
+
+        try:
+            return self._drive(command, "followed the replanner to the end")
+        finally:
+            stop.set()
+            if worker.is_alive():
+                worker.join(timeout=replanner.max_time + 5.0)
+
     def _check_target(self, target: Any, current: np.ndarray) -> None:
         """A joint target in collision, or whose straight joint-space path from the current command is not certified
         clear (:func:`~taplan.planning.check_segment`), is refused: the streamer keeps its previous target."""
