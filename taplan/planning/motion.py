@@ -53,7 +53,6 @@ from taplan.planning.verify import MIN_CERTIFIED, SegmentCheck, Verification, ch
 from taplan.robot import Robot
 from taplan.scene.scene import Scene, as_pose
 from taplan.scene.world import CollisionWorld
-from taplan.timing.toppra_retime import DEFAULT_POINTS_PER_SEGMENT
 from taplan.trajectory import Trajectory
 
 __all__ = ["plan_motion", "MotionPlan", "PlanReport"]
@@ -62,10 +61,10 @@ DEFAULT_MARGIN = 0.01  # [m] clearance of the path's configurations (edges keep 
 STAGES = ("straight", "optimization", "rrt-connect")
 PERTURBED_SEEDS = 2  # optimisation seeds through a random collision-free midpoint, after the straight line
 DENSIFY_STEP = 0.1  # [rad] longest path segment handed to the timing (max-norm)
-# TOPP-RA grid segments per densified interval of the first (fastest) polyline timing: 4 instead of toppra_retime's
-# 16 is 2-5x cheaper (15-50 ms instead of 50-110 ms per optimised path) for durations 0-6 % longer (issue 22's
-# profile); the fallback timings keep the finer grid
-FIRST_TIMING_POINTS = 4
+# TOPP-RA grid segments per densified interval of a polyline's timing: 4 instead of toppra_retime's 16 is 2-5x
+# cheaper (15-50 ms instead of 50-110 ms CPU per optimised path; a sampled path whose corners need the exact-waypoint
+# filter, several TOPP-RA solves: 0.7 s instead of 2.2 s) for durations 0-6 % longer (issue 22's profile)
+TIMING_POINTS = 4
 BUDGET_TOLERANCE = 0.2  # [s] documented overrun of max_time: one indivisible step (an IK solve, a QP, a timing)
 IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
 FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path search leaves this for timing + verify
@@ -373,12 +372,11 @@ class _Timed:
 class _Timing:
     """One way to time the path: ruckig on a straight segment (``step`` None), else the jerk-limited filter of the
     path densified to ``step`` [rad] with corners cut by at most ``deviation`` [rad] (0: exact waypoints), under the
-    limits scaled by ``speed``, on a TOPP-RA grid of ``points`` segments per densified interval."""
+    limits scaled by ``speed``."""
 
     step: float | None
     deviation: float
     speed: float
-    points: int = DEFAULT_POINTS_PER_SEGMENT
 
     def describe(self) -> str:
         if self.step is None:
@@ -396,7 +394,7 @@ def _timings(two_points: bool, max_deviation: float) -> list[_Timing]:
     the corners compoundingly and can crawl: 20 s instead of 0.8 s at the hardware limits)."""
     out = [_Timing(None, 0.0, 1.0)] if two_points else []
     out += [
-        _Timing(DENSIFY_STEP, max_deviation, 1.0, FIRST_TIMING_POINTS),
+        _Timing(DENSIFY_STEP, max_deviation, 1.0),
         _Timing(DENSIFY_STEP, max_deviation, 0.5),
         _Timing(DENSIFY_STEP / 2, max_deviation / 5, 1.0),  # jerk_limited: exact waypoints when that is faster
         _Timing(DENSIFY_STEP, max_deviation, 0.25),
@@ -457,10 +455,10 @@ def _time_and_verify(
             dense = _densify(path, how.step)[:, active]
             if how.deviation > 0:
                 part = jerk_limited(
-                    dense, scaled, method="joint", max_deviation=how.deviation, points_per_segment=how.points
+                    dense, scaled, method="joint", max_deviation=how.deviation, points_per_segment=TIMING_POINTS
                 ).trajectory
             else:
-                part = jerk_limited(dense, scaled, method="path", points_per_segment=how.points).trajectory
+                part = jerk_limited(dense, scaled, method="path", points_per_segment=TIMING_POINTS).trajectory
         return _full_trajectory(part, names, active, q0)
 
     candidates: list[tuple[float, int, _Timing, Trajectory]] = []
