@@ -83,7 +83,7 @@ def ompl_setup(
 def ompl_pipeline(
     world: CollisionWorld, compiled: CompiledScene, robot: taplan.Robot, start: np.ndarray, goal: np.ndarray
 ) -> dict[str, Any]:
-    begin = time.perf_counter()
+    begin, begin_cpu = time.perf_counter(), time.process_time()
     active = np.flatnonzero(np.abs(goal - start) > 1e-12)
     n = len(active)
     setup = ompl_setup(world, compiled, robot, start, active)
@@ -95,14 +95,20 @@ def ompl_pipeline(
     setup.setStartAndGoalStates(s, g)
     solved = setup.solve(MAX_TIME)
     if not setup.haveExactSolutionPath():
-        return {"success": False, "certified": False, "seconds": time.perf_counter() - begin, "reason": str(solved)}
+        return {
+            "success": False,
+            "certified": False,
+            "seconds": time.perf_counter() - begin,
+            "cpu": time.process_time() - begin_cpu,
+            "reason": str(solved),
+        }
     setup.simplifySolution(max(MAX_TIME - (time.perf_counter() - begin), 1e-3))  # within the same budget
     path = setup.getSolutionPath()
     waypoints = np.array([[path.getState(i)[k] for k in range(n)] for i in range(path.getStateCount())])
     trajectory = toppra_defaults(robot, waypoints, active)
-    seconds = time.perf_counter() - begin
+    seconds, cpu = time.perf_counter() - begin, time.process_time() - begin_cpu
     if trajectory is None:
-        return {"success": False, "certified": False, "seconds": seconds, "reason": "toppra failed"}
+        return {"success": False, "certified": False, "seconds": seconds, "cpu": cpu, "reason": "toppra failed"}
     full = np.repeat(start[None, :], len(waypoints), axis=0)
     full[:, active] = waypoints
     collisions, clearance = dense_check(compiled, world, trajectory, trajectory.duration, start, active)
@@ -110,6 +116,7 @@ def ompl_pipeline(
         "success": True,
         "certified": collisions == 0,
         "seconds": seconds,
+        "cpu": cpu,
         "path_length": float(np.linalg.norm(np.diff(full, axis=0), axis=1).sum()),
         "duration": float(trajectory.duration),
         "path_topp_duration": float(trajectory.duration),
@@ -121,12 +128,18 @@ def ompl_pipeline(
 def taplan_pipeline(
     world: CollisionWorld, compiled: CompiledScene, robot: taplan.Robot, problem: Any
 ) -> dict[str, Any]:
-    begin = time.perf_counter()
+    begin, begin_cpu = time.perf_counter(), time.process_time()
     try:
         plan = plan_motion(robot, problem.start, problem.goal, world=world, max_time=MAX_TIME, seed=problem.index)
     except taplan.TaplanError as exc:
-        return {"success": False, "certified": False, "seconds": time.perf_counter() - begin, "reason": str(exc)[:200]}
-    seconds = time.perf_counter() - begin
+        return {
+            "success": False,
+            "certified": False,
+            "seconds": time.perf_counter() - begin,
+            "cpu": time.process_time() - begin_cpu,
+            "reason": str(exc)[:200],
+        }
+    seconds, cpu = time.perf_counter() - begin, time.process_time() - begin_cpu
     index = np.arange(robot.nq)
     collisions, clearance = dense_check(
         compiled, world, plan.trajectory, plan.trajectory.duration, problem.start, index
@@ -138,6 +151,7 @@ def taplan_pipeline(
         "success": True,
         "certified": collisions == 0,
         "seconds": seconds,
+        "cpu": cpu,
         "stage": plan.report.stage,
         "notes": list(plan.report.notes),
         "approaches": [(a.end, a.clearance) for a in plan.report.approaches],
@@ -186,6 +200,7 @@ def _stats(records: list[dict[str, Any]], solvable: list[bool], budget: float) -
     certified = [r for r in good if r["certified"]]
     solved = sum(r["success"] and r["certified"] for r, ok in zip(records, solvable, strict=True) if ok)
     seconds = [r["seconds"] for r in records]
+    cpu = [r.get("cpu", np.nan) for r in records]  # results saved before CPU times were recorded have none
     return [
         f"{len(good)}/{len(records)}",
         f"{len(certified)}/{len(records)}",
@@ -194,6 +209,8 @@ def _stats(records: list[dict[str, Any]], solvable: list[bool], budget: float) -
         float(np.median(seconds)),
         float(np.percentile(seconds, 95)),
         float(max(seconds)),
+        float(np.median(cpu)),
+        float(np.percentile(cpu, 95)),
         f"{sum(t <= budget for t in seconds)}/{len(seconds)}",
         float(np.median([r["path_length"] for r in good])) if good else float("nan"),
         float(np.median([r["duration"] for r in good])) if good else float("nan"),
@@ -218,7 +235,7 @@ STAGES = ("validate", "goal_ik", "straight", "optimize", "sample", "smooth", "ti
 
 def _stage_table(rows: list[dict[str, Any]], families: list[str]) -> str:
     """Median seconds per stage and family (successful plans), with the problems' indices (their seeds)."""
-    header = ["scenes", "problems (seeds)", *STAGES, "total median [s]", "OMPL median [s]"]
+    header = ["scenes", "problems (seeds)", *STAGES, "total median [s]", "CPU median [s]", "OMPL median [s]"]
     table = []
     for family in (*families, "all"):
         subset = [r for r in rows if family in ("all", r["family"])]
@@ -226,8 +243,9 @@ def _stage_table(rows: list[dict[str, Any]], families: list[str]) -> str:
         seeds = "all" if family == "all" else ", ".join(str(r["index"]) for r in subset)
         medians = [float(np.median([t[k] for t in timed])) if timed else float("nan") for k in STAGES]
         total = float(np.median([r["taplan"]["seconds"] for r in subset]))
+        cpu = float(np.median([r["taplan"].get("cpu", np.nan) for r in subset]))
         peer = float(np.median([r["ompl"]["seconds"] for r in subset]))
-        table.append([family, seeds, *medians, total, peer])
+        table.append([family, seeds, *medians, total, cpu, peer])
     return _harness.markdown_table(header, table)
 
 
@@ -244,6 +262,8 @@ def markdown(results: dict[str, Any]) -> str:
         "time median [s]",
         "p95 [s]",
         "max [s]",
+        "CPU median [s]",
+        "CPU p95 [s]",
         f"within {budget:g} s",
         "path length median [rad]",
         "duration median [s]",
@@ -273,6 +293,9 @@ def markdown(results: dict[str, Any]) -> str:
     bent = sum(bool(r["taplan"].get("approaches")) for r in rows)
     stage_line = ", ".join(f"{s} {stages.count(s)}" for s in ("straight", "optimization", "rrt-connect", "failed"))
     p95_ours = float(np.percentile([r["seconds"] for r in ours], 95))
+    c_ours = float(np.median([r.get("cpu", np.nan) for r in ours]))
+    c_p95 = float(np.percentile([r.get("cpu", np.nan) for r in ours], 95))
+    c_peer = float(np.median([r.get("cpu", np.nan) for r in peer]))
     goals = [
         f"solved >= 99.5 % of the solvable problems: {solved}/{sum(solvable)} = {100 * rate:.1f} % "
         f"({'met' if rate >= 0.995 else 'NOT met'})",
@@ -283,6 +306,8 @@ def markdown(results: dict[str, Any]) -> str:
         f"every call within max_time + {results['tolerance']:g} s: {len(ours) - late}/{len(ours)} "
         f"({'met' if late == 0 else 'NOT met'})",
         f"median planning time vs the fair OMPL peer's: {t_ours:.3f} s vs {t_peer:.3f} s = {t_ours / t_peer:.2f}x",
+        f"in CPU time (the machine is shared): taplan median {c_ours * 1e3:.0f} ms, p95 {c_p95 * 1e3:.0f} ms; OMPL "
+        f"median {c_peer * 1e3:.0f} ms; ratio {c_ours / c_peer:.2f}x",
         f"median duration (problems both solved, certified): {d_ours:.2f} s vs {d_peer:.2f} s",
     ]
     return "\n".join(
