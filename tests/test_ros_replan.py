@@ -84,7 +84,10 @@ def _with_ball(scene: Scene, centre: np.ndarray) -> Scene:
 
 def test_replans_over_dds_around_a_ball_moving_into_the_path(robot, sim_domain) -> None:
     interface = DdsInterface(sim_domain, config=loopback_config())
-    runner = Runner(interface, robot, config=RunnerConfig(rate=RATE, settle_time=2.0))
+    # the sim is a second process on a loaded 2-core machine: its joint states can pause for 0.2 s (the runner's
+    # floor) under load; stall detection is tested elsewhere (test_ros_run), here it allows half a second
+    config = RunnerConfig(rate=RATE, settle_time=2.0, state_timeout=0.5, stale_periods=50.0)
+    runner = Runner(interface, robot, config=config)
     start = runner.wait_for_state()
     np.testing.assert_allclose(start, robot.home, atol=1e-9)  # the sim starts at home
     scene = _scene()
@@ -104,10 +107,10 @@ def test_replans_over_dds_around_a_ball_moving_into_the_path(robot, sim_domain) 
     # configuration the arm can reach before the hand-over and its stop, hit by the first plan
     arrival = 0.1 * first.duration
     reachable = [first(t) for t in np.linspace(0.0, min(arrival + LATENCY + 1.5, first.duration), 30)]
-    for fraction in np.linspace(0.6, 0.95, 8):
+    for fraction in np.linspace(0.6, 0.95, 36):
         ball = robot.frame_pose(first(fraction * first.duration), "right_tcp")[:3, 3]
         trial = CollisionWorld(robot, _with_ball(scene, ball), engine=False)
-        if _ball_distance(trial, goal) > 0.03 and min(_ball_distance(trial, q) for q in reachable) > 0.02:
+        if _ball_distance(trial, goal) > 0.025 and min(_ball_distance(trial, q) for q in reachable) > 0.02:
             break
     else:
         pytest.fail("no place on the path for the ball")
