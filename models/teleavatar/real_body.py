@@ -7,16 +7,19 @@ from the vendor's teleavatar_urdf_20260928-v2, and ``model/assets/collision/*.ob
 of the vendor's collision meshes, listed in ``model/assets/collision/index.json``). Its vertices were read through
 a text index and transcribed into one file per MuJoCo body, ``<body>.txt`` with lines ``x y z`` in mm in that
 body's frame, pieces separated by ``# piece`` lines: ``RAW/`` (first session: rounded to 1 mm, representative
-subsets: every ring and every extreme of each piece) and ``RAW/full/`` (second session: rounded to 0.1 mm; the
-small pieces with every vertex, the large ones (~1,000 vertices) by their extremes and outer rings, a few tiny
-or boxy pieces by their bounding-box corners, a superset of the piece). The body placements used are in
+subsets: every ring and every extreme of each piece) and ``RAW/full/`` (second session: 0.1 mm; every vertex of
+arm links 1, 3, 5, 6, of the finger, of the wrist camera, of the small pieces and of link 4's elbow piece 2; the
+other large pieces (~300-1,100 vertices) by their extremes and outer rings, a few tiny or boxy pieces by their
+bounding-box corners, a superset of the piece). Where a piece was later read in full, the representative subset
+had missed at most 0.7 mm (link 3) beyond the bodies fitted to it. The body placements used are in
 ``BODY_CHAIN`` / ``GRIPPER`` / ``EYE`` / ``CARRIAGE`` below (numbers from robot.xml). The raw transcriptions are
 not in the repository (vendor-derived vertices); the npz records its source in its ``source`` entry.
 
 What the reference set covers (and what it does not):
 
-* left arm links 1, 3, 5, 6 (single convex hulls), link 2 (all 16 pieces), link 4 (all 16 pieces; pieces 1, 2,
-  4, 7, 9, 11-13 from the first of their 2-4 pages of vertices);
+* left arm links 1, 3, 5, 6 (single convex hulls, every vertex), link 2 (all 16 pieces; pieces 4, 7, 14 and 15
+  by the extremes and rings of their vertex pages), link 4 (all 16 pieces; piece 2 every vertex, pieces 1, 4, 7, 9,
+  11-13 by the extremes and rings of their first 1-2 pages);
 * the gripper body (all 32 pieces), the fingers (``rg-link3``; the other finger is its mirror image: same mass and
   hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers (``rg-link2``,
   the 8 of its 16 pieces the index stores; carrier b is its mirror image), drive links (``rg-link9``,
@@ -60,7 +63,8 @@ SOURCE = (
     "armR2_link_5: mirror checks), lg-base_link_0-31, rg-link1_0-1, rg-link2 (8 of 16), rg-link3_0, rg-link8_0, "
     "rg-link9_0, rg-link10_0, body_link_0, eye_Link_0, lift_carriage_link_0-15, base_link_0-1 (the lift column); "
     "vertices transcribed by hand "
-    "(0.1-1 mm), placed in taplan's link frames by models/teleavatar/real_body.py (see its docstring for what is "
+    "(0.1 mm; arm links 1, 3, 5, 6, finger, wrist camera: every vertex; first-session subsets at 1 mm), "
+    "placed in taplan's link frames by models/teleavatar/real_body.py (see its docstring for what is "
     "complete and what is representative or estimated). Points in metres; sets 'Link-XN[/part[@opening]]' and "
     "'root/part'."
 )
