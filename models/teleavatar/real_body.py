@@ -21,10 +21,11 @@ What the reference set covers (and what it does not):
   by the extremes and rings of their vertex pages), link 4 (all 16 pieces; piece 2 every vertex, pieces 1, 4, 7, 9,
   11-13 by the extremes and rings of their first 1-2 pages);
 * the gripper body (all 32 pieces), the fingers (``rg-link3``; the other finger is its mirror image: same mass and
-  hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers (``rg-link2``,
-  the 8 of its 16 pieces the index stores; carrier b is its mirror image), drive links (``rg-link9``,
-  ``rg-link10``), crank (``rg-link1``, 2 of 16 pieces), all placed by robot.xml's joint couplings over the opening;
-  the parallel bars (link4/link7: no piece in the index) are estimated boxes (``BAR_HALF_WIDTH``);
+  hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers
+  (``rg-link2``, the 8 of its 16 pieces the index stores; carrier b is its mirror image), drive links
+  (``rg-link9``, ``rg-link10``), crank (``rg-link1``, pieces 0, 1, 3, 15 of 16, as bounding boxes), all placed by
+  robot.xml's joint couplings over the opening; the parallel bars (link4/link7: no piece in the index) are
+  estimated boxes (``BAR_HALF_WIDTH``);
 * the torso and head housing (``body_link``, one hull: torso front/back, shoulder flanges, neck and head), the head
   camera (``eye_Link``) and the lift carriage behind the torso (``lift_carriage_link``, 16 pieces), both rigid with
   the torso;
@@ -60,7 +61,7 @@ NPZ = ROOT / "tests" / "data" / "real_body_points.npz"
 SOURCE = (
     "Matisse06/AgenticTeleAvatar2.0 (public repository): model/robot.xml @275c432 (body placements, gripper joint "
     "couplings) and model/assets/collision/*.obj @98399bd (CoACD convex pieces): armL1-6_link (armR1_link_0, "
-    "armR2_link_5: mirror checks), lg-base_link_0-31, rg-link1_0-1, rg-link2 (8 of 16), rg-link3_0, rg-link8_0, "
+    "armR2_link_5: mirror checks), lg-base_link_0-31, rg-link1_0,1,3,15, rg-link2 (8 of 16), rg-link3_0, rg-link8_0, "
     "rg-link9_0, rg-link10_0, body_link_0, eye_Link_0, lift_carriage_link_0-15, base_link_0-1 (the lift column); "
     "vertices transcribed by hand "
     "(0.1 mm; arm links 1, 3, 5, 6, finger, wrist camera: every vertex; first-session subsets at 1 mm), "
@@ -259,7 +260,7 @@ def gripper_points(raw: Path, side: str, opening: float) -> dict[str, np.ndarray
 
     The two finger groups of a gripper are mirror images of each other (robot.xml: finger joint, inertials);
     the index holds the right gripper's carrier a (``rg-link2``, 8 of its 16 pieces), finger (``rg-link3``),
-    drive links (``rg-link9``, ``rg-link10``) and crank (``rg-link1``, 2 of 16 pieces), the same parts in both
+    drive links (``rg-link9``, ``rg-link10``) and crank (``rg-link1``, 4 of 16 pieces), the same parts in both
     grippers (same inertials in their own frames), so both grippers use them; carrier b (``link5``, not in the
     index) is carrier a mirrored (y -> -y in its frame, as the finger is); the parallel bars are estimated boxes.
     """
