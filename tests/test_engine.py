@@ -224,3 +224,29 @@ def test_single_query_jacobian_matches_finite_differences(robot: taplan.Robot) -
         numeric = (plus.distance - minus.distance) / (2 * h)
         smooth = got.distance > 1e-3  # away from contact the distance is differentiable
         np.testing.assert_allclose((got.jacobian @ dq)[smooth], numeric[smooth], rtol=0, atol=FD_TOL)
+
+
+def test_worlds_sharing_the_compiled_kernel_across_threads(robot: taplan.Robot) -> None:
+    """Worlds of one robot share the compiled end point kernel's buffers; two threads querying at once still get
+    each configuration's own distances (the compiled call releases the GIL)."""
+    import threading
+
+    scene = _scene(4)
+    worlds = [CollisionWorld(robot, scene), CollisionWorld(robot, scene)]
+    Q = _configurations(robot, 30, 4)
+    expected = [worlds[0].distances(q).distance for q in Q]
+    failures: list[int] = []
+
+    def run(world: CollisionWorld, order: np.ndarray) -> None:
+        for _ in range(5):
+            for k in order:
+                if not np.array_equal(world.distances(Q[k]).distance, expected[k]):
+                    failures.append(int(k))
+
+    orders = (np.arange(30), np.arange(30)[::-1])
+    threads = [threading.Thread(target=run, args=(w, o)) for w, o in zip(worlds, orders, strict=True)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not failures

@@ -26,6 +26,7 @@ and the witness's offset ``r n`` from the axis adds ``n · (ω × n) = 0``.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -551,12 +552,13 @@ class _Kinematics:
             function, q_in, e_out, j_out = self.native
             E = np.empty((N, B * 6))
             JE = np.empty((N, nv, B * 6)) if jacobian else None
-            for n in range(N):
-                q_in[:] = Q[n]
-                function()
-                E[n] = e_out
-                if JE is not None:
-                    JE[n] = j_out.reshape(nv, B * 6)
+            with KERNEL_LOCK:  # the buffers are shared by every world of the robot, whatever thread it runs in
+                for n in range(N):
+                    q_in[:] = Q[n]
+                    function()
+                    E[n] = e_out
+                    if JE is not None:
+                        JE[n] = j_out.reshape(nv, B * 6)
             ends = E.reshape(N, B, 2, 3)
             rows = None if JE is None else JE.reshape(N, nv, B, 2, 3).transpose(0, 2, 3, 4, 1)
             return ends, rows
@@ -592,6 +594,9 @@ class _Kinematics:
 
 
 _kernels: dict[str, Any] = {}
+# held around every use of a kernel's buffers: the compiled call releases the GIL (ctypes), and worlds of one robot
+# share a kernel across threads (a viewer's playback thread and a planner, say)
+KERNEL_LOCK = threading.Lock()
 
 
 def _native_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:

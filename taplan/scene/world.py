@@ -23,7 +23,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from taplan.errors import CollisionError, InvalidInputError
-from taplan.scene.engine import segment_parameters, shape_code, shape_size, solid_pairs
+from taplan.scene.engine import KERNEL_LOCK, segment_parameters, shape_code, shape_size, solid_pairs
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import Scene
 from taplan.scene.shapes import Box, HalfSpace
@@ -326,12 +326,13 @@ class CollisionWorld:
         JE = None
         if kernel is not None:  # the bodies' end points (and their Jacobians) in one compiled call
             function, q_in, e_out, j_out = kernel
-            q_in[:] = q
-            function()
-            points = e_out.reshape(-1, 2, 3).copy()
+            with KERNEL_LOCK:
+                q_in[:] = q
+                function()
+                points = e_out.reshape(-1, 2, 3).copy()
+                if jacobian:
+                    JE = j_out.reshape(model.nv, -1, 2, 3).transpose(1, 2, 3, 0).copy()  # (B, 2, 3, nv)
             starts, ends = points[:, 0], points[:, 1]
-            if jacobian:
-                JE = j_out.reshape(model.nv, -1, 2, 3).transpose(1, 2, 3, 0).copy()  # (B, 2, 3, nv)
         if kernel is None or attached:  # attached objects ride on frames: pinocchio's placements
             if jacobian:
                 pin.computeJointJacobians(model, data, q)  # WORLD-frame columns of every joint in data.J
