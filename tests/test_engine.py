@@ -205,6 +205,8 @@ def test_single_queries_equal_the_coal_reference(robot: taplan.Robot, seed: int,
                 compared += 1
         (d, pair), (d_ref, pair_ref) = world.min_distance(q), reference.min_distance(q)
         assert d == pytest.approx(d_ref, abs=DIST_TOL) and (pair == pair_ref or d < -1e-6)
+        d_all, pair_all = reference.distances(q, jacobian=False).closest()  # branch and bound = every pair exact
+        assert d == pytest.approx(d_all, abs=DIST_TOL) and (pair == pair_all or d < -1e-6)
     assert penetrating > 0 and compared > 1000  # both regimes were exercised
     assert any(p[1] == "seen" for p in ref.pairs) and attached == any(p[0] == "tool" for p in ref.pairs)
 

@@ -318,6 +318,12 @@ class CollisionWorld:
         ``bound_beyond`` [m]: those report that gap, a lower bound of their distance (enough for certificates,
         which only need lower bounds, and much cheaper than a coal query).
         """
+        return self._distances(q, cutoff, jacobian, bound_beyond)
+
+    def _distances(
+        self, q: npt.ArrayLike, cutoff: float, jacobian: bool, bound_beyond: float, self_pairs: bool = True
+    ) -> Distances:
+        """:meth:`distances`; ``self_pairs=False`` leaves the robot-robot pairs out."""
         q = self._configuration(q)
         self._refresh()
         model, data = self.model, self.data
@@ -345,7 +351,7 @@ class CollisionWorld:
             starts = np.einsum("bij,bj->bi", rotation, self._body_start) + origin
             ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
         parts: list[_Pairs] = []
-        if self.self_pairs:
+        if self.self_pairs and self_pairs:
             parts += self._self_distances(starts[None], ends[None], cutoff)
         if self._items:
             parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
@@ -837,7 +843,13 @@ class CollisionWorld:
         ]
         best = min(exact, default=math.inf)
         if len(coarse.distance) and float(np.min(coarse.distance)) < best:
-            return self.distances(q, jacobian=False, bound_beyond=best).closest()
+            # the robot pairs are exact already (the first ones, all of them): only the others again, exactly
+            # where their bound is below the best exact distance
+            S = len(self.self_pairs)
+            k = int(np.argmin(coarse.distance[:S])) if S else -1
+            closest_self = (float(coarse.distance[k]), coarse.pairs[k]) if S else (math.inf, ("", ""))
+            rest = self._distances(q, math.inf, False, best, self_pairs=False).closest()
+            return rest if rest[0] < closest_self[0] else closest_self
         return coarse.closest()
 
     def in_collision(self, q: npt.ArrayLike, *, margin: float | None = None) -> bool:
