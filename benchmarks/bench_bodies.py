@@ -229,6 +229,7 @@ def main(argv: list[str] | None = None) -> None:
         results["rounds"] = args.rounds
     else:
         results["taplan"] = measure()
+    results["quick"] = bool(args.quick)
     if args.planning:
         results["planning"] = planning(args.planning)
         for family, row in results["planning"].items():
@@ -265,6 +266,8 @@ def main(argv: list[str] | None = None) -> None:
                 + _harness.markdown_table(["query", "wall", "CPU"], ratio_rows)
             )
         if "planning" in results:
+            total = int(sum(r["problems"] for r in results["planning"].values()))
+            text += f"\n\n`plan_motion` (5 s budget) on {total} seeded problems of `benchmarks/_scenes.py`:"
             text += "\n\n" + _harness.markdown_table(
                 ["family", "solved", "mean time [s]"],
                 [
