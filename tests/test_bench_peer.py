@@ -45,6 +45,32 @@ def test_compiled_distances_equal_the_worlds(robot: taplan.Robot) -> None:
     assert 0 < colliding < 60  # both outcomes were exercised
 
 
+def test_peer_and_dense_check_see_every_capsule_of_the_real_body(robot: taplan.Robot) -> None:
+    """The peer's validity check and the dense check hold the world's bodies as they are: every capsule of the
+    real body (links, grippers, wrist cameras, fingers), placed where the world places them."""
+    world = CollisionWorld(robot, make_scene("window", np.random.default_rng(0)))
+    compiled = CompiledScene(world)
+    names = [g.name for g in compiled.geometry.geometryObjects]
+    assert set(names) == {b.name for b in world.bodies} | set(world.scene.obstacles)
+    for arm in ("left", "right"):
+        for part in ("fingers_0", "fingers_1", "gripper_0", "wrist_camera", "link6"):
+            assert f"{arm}_{part}" in names
+    fingers = [p for p in compiled.pairs if "right_fingers_0" in p]
+    assert any(o in p for p in fingers for o in world.scene.obstacles)  # fingers against the scene are checked
+    # a sphere at the fingers' capsule touches them in both checks: the compiled body is where the world's is
+    body = next(b for b in world.bodies if b.name == "right_fingers_0")
+    import pinocchio as pin
+
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.home)
+    tip = data.oMi[body.joint].act(np.asarray(body.end, float))
+    scene = Scene()
+    scene.add("ball", Sphere(0.005), (tip, [0, 0, 0, 1]))
+    at_tip = CollisionWorld(robot, scene)
+    assert not CompiledScene(at_tip).valid(robot.home)
+    assert at_tip.min_distance(robot.home)[0] < 0
+
+
 def test_motion_resolution_moves_no_point_more_than_half_the_thinnest_obstacle(robot: taplan.Robot) -> None:
     world = CollisionWorld(robot, make_scene("window", np.random.default_rng(0)))
     active = robot.group("right").indices

@@ -162,3 +162,34 @@ def test_budget_bounds_the_whole_call(robot: taplan.Robot) -> None:
         except PlanningError as exc:
             assert "budget" in str(exc) or f"within {max_time:g} s" in str(exc)
         assert time.perf_counter() - begin <= max_time + motion.BUDGET_TOLERANCE + 0.5
+
+
+def test_smoothed_path_gets_no_fallback_timings(robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With a certified plan in hand, a smoothed path whose fastest timing is refused is dropped: the slower timings
+    of the fallback chain (seconds under load) are not tried for it; without that option they are."""
+    import dataclasses
+
+    world = CollisionWorld(robot, Scene())
+    goal = _goal(robot)
+    middle = (robot.home + goal) / 2
+    middle[robot.group("right").indices[1]] += 0.3
+    path = [robot.home, middle, goal]
+    active = np.array(robot.group("right").indices)
+    real = motion.verify_trajectory
+    verified: list[float] = []
+
+    def refuse_the_first(world, trajectory, **options):  # noqa: ANN001, ANN202 (a stand-in)
+        check = real(world, trajectory, **options)
+        verified.append(trajectory.duration)
+        if len(verified) == 1:
+            return dataclasses.replace(check, collision_free=False, min_clearance=0.001, pair=("right_link6", "x"))
+        return check
+
+    monkeypatch.setattr(motion, "verify_trajectory", refuse_the_first)
+    times = dict.fromkeys(("timing", "verify"), 0.0)
+    args = (robot, world, path, [], active, robot.planning_limits, robot.home, goal, 0.01, 0.05)
+    refused = motion._time_and_verify(*args, time.perf_counter() + 30.0, times, fallbacks=False)
+    assert isinstance(refused, str) and "right_link6" in refused and len(verified) == 1
+    verified.clear()
+    timed = motion._time_and_verify(*args, time.perf_counter() + 30.0, times)
+    assert not isinstance(timed, str) and timed.fallback.startswith("timing fell back to") and len(verified) == 2

@@ -11,7 +11,7 @@ import taplan
 from taplan.planning import motion, plan_motion, rrt_connect
 from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.motion import _margins
-from taplan.planning.rrt import rrt_connect_shrinking
+from taplan.planning.rrt import SPACING_SHARE, rrt_connect_groups, rrt_connect_shrinking
 from taplan.planning.verify import check_segment
 from taplan.scene import Box, CollisionWorld, Cylinder, HalfSpace, Scene, Sphere
 
@@ -65,6 +65,35 @@ def test_clearance_check_agrees_with_the_worlds_distances(robot: taplan.Robot, c
     assert check.checks == len(outcomes)
 
 
+def test_clearance_check_of_the_moving_joints_tests_the_pairs_they_move(robot: taplan.Robot) -> None:
+    """With the right arm's joints: every pair with a right-arm body (or what it carries) is tested, no pair of two
+    bodies that stay put (the left arm against the table, the torso against the floor); the answers are those of
+    the world's distances over the tested pairs."""
+    scene = Scene()
+    scene.add("floor", HalfSpace(), ([0, 0, -0.9], [0, 0, 0, 1]))
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
+    scene.attach("cup", Cylinder(0.035, 0.12), "right_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    active = np.array(robot.group("right").indices)
+    check = ClearanceCheck(world, 0.01, active)
+    right = {b.name for b in world.bodies if b.group == "right"} | {"cup"}
+    every = ClearanceCheck(world, 0.01).pairs
+    assert set(check.pairs) == {p for p in every if set(p) & right}
+    assert ("left_link4", "table") in every and ("left_link4", "table") not in check.pairs
+    assert ("right_link4", "table") in check.pairs and ("left_link4", "right_link6") in check.pairs
+    rng = np.random.default_rng(5)
+    outcomes = []
+    for _ in range(100):
+        q = robot.home.copy()
+        q[active] = _random(robot, rng)[active]
+        d = world.distances(q, jacobian=False)
+        tested = min(x for p, x in zip(d.pairs, d.distance, strict=True) if set(p) & right)
+        if abs(tested - 0.01) > 1e-6:
+            assert check(q) == (tested >= 0.01)
+            outcomes.append(tested >= 0.01)
+    assert 0 < sum(outcomes) < len(outcomes)
+
+
 def test_clearance_motion_cannot_step_over_a_thin_obstacle(robot: taplan.Robot) -> None:
     """A 2 cm ball on the forearm's path: the end states are clear, the motion is refused."""
     world = CollisionWorld(robot, Scene())
@@ -86,6 +115,8 @@ def test_clearance_motion_cannot_step_over_a_thin_obstacle(robot: taplan.Robot) 
     # the states it tested are no more than the spacing of robot-point travel apart
     travel = world.max_point_speed_bound(q_a, q_b)
     assert travel / 0.008 > 20 and check.checks <= int(np.ceil(travel / 0.008)) + 3
+    # the sampler's own spacing cannot step over the 2 cm ball either (the band is 2 cm plus the margin each side)
+    assert not check.motion(q_a, q_b, spacing=SPACING_SHARE * margin)
 
 
 def test_sampled_path_is_certified_edge_by_edge(robot: taplan.Robot) -> None:
@@ -131,6 +162,41 @@ def test_sampler_shrinks_its_margin_when_the_widest_is_impossible(robot: taplan.
     assert kept == 0.01
     for a, b in zip(path[:-1], path[1:], strict=True):
         assert check_segment(world, a, b, kept, points=kept / 2).valid
+
+
+def test_both_arms_are_moved_one_after_the_other_on_certified_edges(robot: taplan.Robot) -> None:
+    """The right arm around the box, the left arm mirrored to the other side: the path first moves one arm while
+    the other holds, then the other; every edge is certified at half the margin it reports."""
+    world = _box_on_table(robot)
+    goal = _goal(robot)
+    left, right = np.array(robot.group("left").indices), np.array(robot.group("right").indices)
+    goal[left] = robot.home[left] + np.array([0.3, 0.2, -0.2, 0.3, 0.0, 0.2, 0.0])
+    assert world.min_distance(goal)[0] >= 0.01 and not check_segment(world, robot.home, goal, 0.01).valid
+    limits = robot.planning_limits
+    found = rrt_connect_groups(
+        world,
+        robot.home,
+        goal,
+        [left, right],
+        limits.lower,
+        limits.upper,
+        (0.01, 0.005),
+        shares=(0.7,),
+        max_time=30.0,
+        rng=np.random.default_rng(2),
+    )
+    assert found is not None
+    path, kept = found
+    assert kept in (0.01, 0.005)
+    np.testing.assert_allclose(path[0], robot.home, atol=0)
+    np.testing.assert_allclose(path[-1], goal, atol=0)
+    # one arm moves while the other holds: each edge moves one arm only, and the arms move in two runs
+    edges = list(zip(path[:-1], path[1:], strict=True))
+    moved = ["left" if np.abs(b[left] - a[left]).max() > 0 else "right" for a, b in edges]
+    for a, b in edges:
+        assert np.abs(b[left] - a[left]).max() == 0 or np.abs(b[right] - a[right]).max() == 0
+        assert check_segment(world, a, b, kept, points=kept / 2).valid
+    assert sum(x != y for x, y in zip(moved[:-1], moved[1:], strict=True)) == 1
 
 
 def test_plan_through_a_passage_reports_the_margin_it_kept(

@@ -9,6 +9,10 @@ nothing. A scene with perceived occupancy (voxels that answer their own distance
 distances instead. Every path it finds is certified afterwards by conservative advancement
 (:func:`~taplan.planning.verify.check_segment`), which stays the planner's only guarantee.
 
+Given the joints that move (``active``), the pairs whose two members both stay put (an obstacle, the torso, the held
+arm) are left out: their distance is that of the start, which the planner checked before sampling; a one-arm search
+then tests about half the pairs.
+
 A motion between two configurations is tested at states spaced so that no robot point moves more than ``spacing``
 between them (``Σ reach_j |Δq_j|``), in bisection order (the middle first: a blocked motion is usually found early).
 """
@@ -46,10 +50,17 @@ def _bisection_order(count: int) -> np.ndarray:
     return np.concatenate([[count], order]) / count
 
 
-class ClearanceCheck:
-    """Whether a configuration keeps ``clearance`` [m] on every active pair of ``world`` (see the module)."""
+def _moved_by(model: pin.Model, joint: int, active: np.ndarray) -> bool:
+    """Whether a body carried by ``joint`` moves when the configuration entries ``active`` change."""
+    indices = {int(i) for i in np.asarray(active).ravel()}
+    return any(model.joints[j].idx_q in indices for j in model.supports[joint] if j > 0)
 
-    def __init__(self, world: CollisionWorld, clearance: float) -> None:
+
+class ClearanceCheck:
+    """Whether a configuration keeps ``clearance`` [m] on every active pair of ``world`` (see the module); with
+    ``active`` (configuration indices), on the pairs that those joints move."""
+
+    def __init__(self, world: CollisionWorld, clearance: float, active: np.ndarray | None = None) -> None:
         import coal
 
         robot = world.robot
@@ -84,6 +95,13 @@ class ClearanceCheck:
                 pin.GeometryObject(attached.name, frame.parentJoint, placement, attached.shape.to_coal())
             )
         self.pairs = world.distances(robot.home, jacobian=False).pairs
+        if active is not None:
+            joints = {
+                self.geometry.geometryObjects[i].name: self.geometry.geometryObjects[i].parentJoint
+                for i in ids.values()
+            }
+            moving = {name for name, joint in joints.items() if _moved_by(self.model, joint, active)}
+            self.pairs = [(a, b) for a, b in self.pairs if a in moving or b in moving]
         for a, b in self.pairs:
             self.geometry.addCollisionPair(pin.CollisionPair(ids[a], ids[b]))
         self.geometry_data = pin.GeometryData(self.geometry)

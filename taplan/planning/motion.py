@@ -15,7 +15,8 @@
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
    straight line, then from polylines through perturbed midpoints (``"optimization"``; the straight line only, for
    a quarter of the search time, when the sampler follows); RRT-Connect (:mod:`~taplan.planning.rrt`, exploring
-   with a compiled clearance test) with shortcutting, then the optimiser as its smoother (``"rrt-connect"``); in
+   with a compiled clearance test; when both arms move, first one arm after the other) with shortcutting, then the
+   optimiser as its smoother (``"rrt-connect"``); in
    a passage too narrow for the margin the sampler's margin shrinks to half, then to the floor
    (``report.margin``). Every edge keeps at least half its margin by conservative advancement
    (:mod:`~taplan.planning.verify`).
@@ -48,7 +49,7 @@ from taplan.errors import InvalidInputError, PlanningError, TaplanError, TimingE
 from taplan.limits import JointLimits
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
 from taplan.planning.optimize import optimize_path
-from taplan.planning.rrt import rrt_connect_shrinking
+from taplan.planning.rrt import rrt_connect_groups, rrt_connect_shrinking
 from taplan.planning.verify import MIN_CERTIFIED, SegmentCheck, Verification, check_segment, verify_trajectory
 from taplan.robot import Robot
 from taplan.scene.scene import Scene, as_pose
@@ -71,6 +72,7 @@ FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path sea
 SMOOTH_HEADROOM, SMOOTH_MIN = 2.5, 0.05  # smoothing runs when the time left exceeds 2.5x the finish + 0.05 s
 OPTIMIZE_SHARE = 0.25  # of the search time, for the optimiser from the straight line when the sampler follows it
 MARGIN_SHARES = 0.7  # of the time left, for the sampler at each margin but the last (the floor gets the rest)
+GROUPS_SHARE = 0.5  # of the sampler's time, for one arm after the other when both move (then both at once)
 
 
 @dataclass(frozen=True)
@@ -167,7 +169,9 @@ def _find_path(
 
     The optimiser gets ``OPTIMIZE_SHARE`` of the search time when the sampler follows it. The sampler tries the
     margins of :func:`_margins` in turn (``MARGIN_SHARES`` of the time left each, the floor all that remains): a
-    passage narrower than the arm plus twice the margin is crossed with less clearance rather than not at all."""
+    passage narrower than the arm plus twice the margin is crossed with less clearance rather than not at all. When
+    both arms move, the sampler first moves one arm after the other (``GROUPS_SHARE`` of its time, both orders:
+    two 7-joint searches), then both at once."""
     for index, stage in enumerate(stages):
         clock = time.perf_counter()
         if stage == "straight":
@@ -191,20 +195,21 @@ def _find_path(
                     return stage, list(result.path), None, margin
             times["optimize"] += time.perf_counter() - clock
         else:
-            left = max(deadline - time.perf_counter(), 0.0)
             margins = _margins(margin, floor)
-            sampled = rrt_connect_shrinking(
-                world,
-                q0,
-                q1,
-                active,
-                limits.lower,
-                limits.upper,
-                margins,
-                shares=(MARGIN_SHARES,) * (len(margins) - 1),
-                max_time=left,
-                rng=rng,
-            )
+            shares = (MARGIN_SHARES,) * (len(margins) - 1)
+            groups = [np.intersect1d(g.indices, active) for g in world.robot.groups.values()]
+            groups = [g for g in groups if g.size]
+            sampled = None
+            if len(groups) > 1 and sum(g.size for g in groups) == active.size:  # both arms: one, then the other
+                left = GROUPS_SHARE * max(deadline - time.perf_counter(), 0.0)
+                sampled = rrt_connect_groups(
+                    world, q0, q1, groups, limits.lower, limits.upper, margins, shares=shares, max_time=left, rng=rng
+                )
+            if sampled is None:
+                left = max(deadline - time.perf_counter(), 0.0)
+                sampled = rrt_connect_shrinking(
+                    world, q0, q1, active, limits.lower, limits.upper, margins, shares=shares, max_time=left, rng=rng
+                )
             if sampled is not None:
                 times["sample"] += time.perf_counter() - clock
                 return stage, sampled[0], None, sampled[1]
@@ -417,10 +422,13 @@ def _time_and_verify(
     deadline: float,
     times: dict[str, float],
     certificate: SegmentCheck | None = None,
+    fallbacks: bool = True,
 ) -> _Timed | str:
     """The timed, verified trajectory of ``path`` with its approach segments, or why there is none (a sentence).
     A straight path's ``certificate`` (``margin / 2`` along the segment) certifies its ruckig timing when that stays
-    on the segment (:func:`_on_certified_segment`): no second certificate of the same configurations."""
+    on the segment (:func:`_on_certified_segment`): no second certificate of the same configurations. Without
+    ``fallbacks`` only the first timing is tried (a smoothed path, when a certified plan is in hand: the slower
+    timings of the fallback chain can take seconds under load, past the budget)."""
     from taplan.timing.jerk_limited import jerk_limited
     from taplan.timing.straight import straight_line
 
@@ -468,7 +476,7 @@ def _time_and_verify(
     options = _timings(len(path) == 2, max_deviation)
     took = 0.0  # [s] the longest timing so far: another one starts only if that much of the budget is left
     for rank, how in enumerate(options[:-1]):
-        if rank and time.perf_counter() + took >= deadline:
+        if rank and (not fallbacks or time.perf_counter() + took >= deadline):
             break
         clock = time.perf_counter()
         try:
@@ -495,6 +503,8 @@ def _time_and_verify(
             return _finish(ends, middle, check, lowest, lowest_pair, 1, "")
         why = _too_close(check, margin / 4)
         first = (middle.duration, why)
+    if not fallbacks:
+        return why
     last = len(options) - 1
 
     def last_resort() -> list[tuple[float, int, _Timing, Trajectory]]:
@@ -748,6 +758,7 @@ def plan_motion(
                     max_deviation,
                     deadline,
                     times,
+                    fallbacks=False,
                 )
                 if isinstance(better, str):
                     notes.append(

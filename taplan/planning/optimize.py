@@ -199,8 +199,10 @@ def _sequential_convex(
     evaluations = _evaluate(world, full, x_path, active, cutoff)
     merit = problem.cost(x) + mu * _violation(evaluations, target)
     iterations = 0
-    while iterations < max_iterations and time.perf_counter() < deadline:
+    longest = 0.0  # [s] the longest iteration so far: another starts only if that much is left before the deadline
+    while iterations < max_iterations and time.perf_counter() + longest < deadline:
         iterations += 1
+        begin = time.perf_counter()
         G, h = _linearised(problem, evaluations, x, target)
         m = G.shape[0]
         P = sp.block_diag([problem.P, sp.identity(m) * 1e-6]).tocsc()
@@ -212,6 +214,7 @@ def _sequential_convex(
         lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(m)])
         ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(m, np.inf)])
         z = qpsolvers.solve_qp(P, q, G if m else None, h if m else None, lb=lb, ub=ub, solver=solver)
+        longest = max(longest, time.perf_counter() - begin)
         if z is None:
             trust /= 2
             if trust < 1e-3:
@@ -222,6 +225,7 @@ def _sequential_convex(
         candidate = np.vstack([x_path[0], x_new.reshape(K - 2, -1), x_path[-1]])
         new_evaluations = _evaluate(world, full, candidate, active, cutoff)
         new_merit = problem.cost(x_new) + mu * _violation(new_evaluations, target)
+        longest = max(longest, time.perf_counter() - begin)
         if merit - new_merit >= 0.1 * max(predicted, 0.0) and new_merit < merit:
             improvement = merit - new_merit
             x, evaluations, merit, x_path = x_new, new_evaluations, new_merit, candidate
