@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import subprocess
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,6 +37,7 @@ from taplan.planning.motion import BUDGET_TOLERANCE
 from taplan.scene import CollisionWorld
 
 MAX_TIME = 5.0  # [s] per planner and problem
+BODIES_CODE = "taplan/scene/robot_bodies.py"  # with models/teleavatar: where the robot's bodies come from
 
 
 def toppra_defaults(robot: taplan.Robot, waypoints: np.ndarray, active: np.ndarray) -> Any:
@@ -179,15 +183,35 @@ def run(count: int, seed: int, families: tuple[str, ...] = FAMILIES) -> dict[str
         row["taplan"] = taplan_pipeline(world, compiled, robot, problem)
         row["ompl"] = ompl_pipeline(world, compiled, robot, problem.start, problem.goal_q)
         rows.append(row)
+    bodies = [b.name for b in CollisionWorld(robot, None).bodies]
     return {
         "rows": rows,
         "count": count,
         "seed": seed,
+        "bodies": bodies,
+        "models_commit": _models_commit(),
+        "load": os.getloadavg()[1],  # [processes] 5-minute load average at the end (2-core machine: shared)
         "families": list(families),
         "max_time": MAX_TIME,
         "tolerance": BUDGET_TOLERANCE,
         "travel": TRAVEL,
     }
+
+
+def _models_commit() -> str:
+    """The last commit that changed the robot's bodies (``models/teleavatar``, ``taplan/scene/robot_bodies.py``), or ""
+    outside git."""
+    root = Path(__file__).resolve().parent.parent
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(root), "log", "-1", "--format=%h", "--", "models/teleavatar", BODIES_CODE],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip()
 
 
 def _solvable(row: dict[str, Any]) -> bool:
@@ -228,6 +252,22 @@ def _failures(rows: list[dict[str, Any]], family: str) -> str:
         elif r["family"] == family and not r["taplan"]["certified"]:
             reasons["collision in the dense check"] = reasons.get("collision in the dense check", 0) + 1
     return "; ".join(f"{count}× {why}" for why, count in sorted(reasons.items(), key=lambda x: -x[1])) or "none"
+
+
+def _bodies_line(results: dict[str, Any]) -> str:
+    """Which robot bodies the three checks (taplan, the peer, the dense check) used, and the machine's load."""
+    bodies = results.get("bodies")
+    if not bodies:
+        return "Robot bodies: not recorded."
+    fingers = [b for b in bodies if "finger" in b]
+    commit = results.get("models_commit") or "?"
+    load = results.get("load")
+    return (
+        f"Robot bodies (taplan, the peer's validity check and the dense check alike): the {len(bodies)} capsules of "
+        f"`CollisionWorld` at commit {commit} ({', '.join(bodies)}; fingers: {len(fingers)}), with the SRDF's "
+        "allowed pairs."
+        + ("" if load is None else f" Machine load (5-minute average, 2 cores, shared) at the end: {load:.1f}.")
+    )
 
 
 STAGES = ("validate", "goal_ik", "straight", "optimize", "sample", "smooth", "timing", "verify")
@@ -324,6 +364,8 @@ def markdown(results: dict[str, Any]) -> str:
             "(the peer is spared the IK). Both certified by the same independent dense check (pinocchio + coal "
             f"distances, {results['travel'] * 1e3:g} mm of link-point travel between samples). Solvable: a "
             "certified trajectory was found by either.",
+            "",
+            _bodies_line(results),
             "",
             _harness.markdown_table(header, table),
             "",

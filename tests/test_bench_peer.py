@@ -133,3 +133,35 @@ def test_dense_check_counts_the_collisions_of_a_motion_through_an_obstacle(robot
     samples = [world.min_distance(through(t))[0] for t in np.linspace(0, 1, 200)]
     assert lowest == pytest.approx(min(lowest, min(samples)), abs=1e-3)
     assert (collisions > 0) == (min(samples) < 0)
+
+
+def test_solvable_means_a_certified_path_by_either_planner_and_the_bodies_are_named(robot: taplan.Robot) -> None:
+    from benchmarks.bench_planning import _solvable, markdown
+
+    def record(success: bool, certified: bool) -> dict:
+        times = dict.fromkeys(("validate", "goal_ik", "straight", "optimize", "sample", "smooth", "timing", "verify"))
+        return {
+            "success": success,
+            "certified": certified,
+            "seconds": 1.0,
+            "reason": "no collision-free path found within 5 s",
+            "collisions": 0 if certified else 3,
+            "clearance": 0.004 if certified else -0.002,
+            "path_length": 2.0,
+            "duration": 1.5,
+            "stage": "rrt-connect",
+            "stage_times": {k: 0.1 for k in times},
+        }
+
+    rows = [  # taplan failed and OMPL certified; OMPL's path collided and taplan failed; both certified
+        {"family": "window", "index": 0, "taplan": record(False, False), "ompl": record(True, True)},
+        {"family": "window", "index": 1, "taplan": record(False, False), "ompl": record(True, False)},
+        {"family": "window", "index": 2, "taplan": record(True, True), "ompl": record(True, True)},
+    ]
+    assert [_solvable(r) for r in rows] == [True, False, True]
+    bodies = [b.name for b in CollisionWorld(robot, None).bodies]
+    results = {"rows": rows, "seed": 0, "max_time": 5.0, "tolerance": 0.2, "travel": 1e-3, "bodies": bodies}
+    text = markdown(results)
+    line = next(x for x in text.splitlines() if x.startswith("| window | taplan"))
+    assert "| 1/2 |" in line  # solved of solvable: the problem no planner certified does not count
+    assert "right_fingers_1" in text and f"the {len(bodies)} capsules" in text
