@@ -193,3 +193,34 @@ def test_smoothed_path_gets_no_fallback_timings(robot: taplan.Robot, monkeypatch
     verified.clear()
     timed = motion._time_and_verify(*args, time.perf_counter() + 30.0, times)
     assert not isinstance(timed, str) and timed.fallback.startswith("timing fell back to") and len(verified) == 2
+
+
+def test_the_optimisers_qp_stops_at_the_deadline(robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch) -> None:
+    """daqp gets the time left as its time limit, and a QP that hits it ends the optimisation (one two-arm QP on the
+    real body took 3.4 s under load); without a deadline no limit is set."""
+    import qpsolvers
+
+    from taplan.planning import optimize
+
+    world, start, goal = _hard_problem(robot)
+    active = np.array(robot.group("right").indices)
+    limits = robot.planning_limits
+    real = qpsolvers.solve_qp
+    given: list[float | None] = []
+
+    def timed_out(*args, **options):  # noqa: ANN002, ANN003, ANN202 (a stand-in: the solver ran out of time)
+        given.append(options.get("time_limit"))
+        if options.get("time_limit") is None:
+            return real(*args, **options)
+        time.sleep(options["time_limit"])
+        return None
+
+    monkeypatch.setattr(optimize.qpsolvers, "solve_qp", timed_out)
+    path = np.array([start, goal])
+    optimize.optimize_path(world, path, active, limits.lower, limits.upper, 0.01, max_iterations=1)
+    assert given and given[0] is None  # no deadline, no limit (and the world's engine is built now)
+    given.clear()
+    begin = time.perf_counter()
+    result = optimize.optimize_path(world, path, active, limits.lower, limits.upper, 0.01, deadline=begin + 1.0)
+    assert result is None and len(given) == 1 and 0 < given[0] <= 1.0  # [s]: the time left, and no second QP
+    assert time.perf_counter() - begin < 1.0 + 0.3

@@ -213,7 +213,12 @@ def _sequential_convex(
         # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
         lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(m)])
         ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(m, np.inf)])
-        z = qpsolvers.solve_qp(P, q, G if m else None, h if m else None, lb=lb, ub=ub, solver=solver)
+        # daqp stops at the deadline (one two-arm QP on the real body took 3.4 s under load): no solution, and the
+        # next iteration does not start
+        limit = (
+            {"time_limit": max(deadline - time.perf_counter(), 1e-3)} if solver == "daqp" and deadline < np.inf else {}
+        )
+        z = qpsolvers.solve_qp(P, q, G if m else None, h if m else None, lb=lb, ub=ub, solver=solver, **limit)
         longest = max(longest, time.perf_counter() - begin)
         if z is None:
             trust /= 2
