@@ -8,7 +8,7 @@ of the vendor's collision meshes, listed in ``model/assets/collision/index.json`
 a text index and transcribed into one file per MuJoCo body, ``<body>.txt`` with lines ``x y z`` in mm in that
 body's frame, pieces separated by ``# piece`` lines: ``RAW/`` (first session: rounded to 1 mm, representative
 subsets: every ring and every extreme of each piece) and ``RAW/full/`` (second session: 0.1 mm; every vertex of
-arm links 1, 3, 5, 6, of the finger, of the wrist camera, of the small pieces and of link 4's elbow piece 2; the
+arm links 1, 3, 5, 6, of the finger, of the wrist camera, of the small pieces and of link 4's pieces 2, 4, 7; the
 other large pieces (~300-1,100 vertices) by their extremes and outer rings, a few tiny or boxy pieces by their
 bounding-box corners, a superset of the piece). Where a piece was later read in full, the representative subset
 had missed at most 0.7 mm (link 3) beyond the bodies fitted to it. The body placements used are in
@@ -18,8 +18,8 @@ not in the repository (vendor-derived vertices); the npz records its source in i
 What the reference set covers (and what it does not):
 
 * left arm links 1, 3, 5, 6 (single convex hulls, every vertex), link 2 (all 16 pieces; pieces 4, 7, 14 and 15
-  by the extremes and rings of their vertex pages), link 4 (all 16 pieces; piece 2 every vertex, pieces 1, 4, 7, 9,
-  11-13 by the extremes and rings of their first 1-2 pages);
+  by the extremes and rings of their vertex pages), link 4 (all 16 pieces; pieces 2, 4, 7 every vertex, pieces 1, 9,
+  11-13 by the extremes and rings of their first page);
 * the gripper body (all 32 pieces), the fingers (``rg-link3``; the other finger is its mirror image: same mass and
   hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers
   (``rg-link2``, the 8 of its 16 pieces the index stores; carrier b is its mirror image), drive links
