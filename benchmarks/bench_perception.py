@@ -12,10 +12,12 @@ plan_motion in scenes perceived through the wrist cameras next to the same probl
    bodies, one query per body.
 3. **Planning**: the seeded problems of ``benchmarks/_scenes.py``; each scene is perceived from the wrist cameras
    (:func:`taplan.scene.scan.perceive`: 8 next-best-view scan poses per wrist camera chosen among 150 seeded arm
-   poses, 160x120 depth images with noise and missing pixels, 2 cm voxels, surfaces taken 4 cm thick) and
-   planned with ``plan_motion`` in the perceived scene (plus the objects the hands carry, which are known) and in
-   the true scene. Both plans are checked by the same
-   independent dense check against the **true** primitives (``benchmarks/_peer.dense_check``).
+   poses for seeing the workspace and, 10x weighted, the space the arm will fill at the goal; 160x120 depth images
+   with noise and missing pixels; 1 cm voxels; unknown space that seen surfaces hide or no image viewed counts as
+   occupied, ``unknown="occluded"``; the robot's space at the start is known free) and planned with
+   ``plan_motion`` in the perceived scene (plus the objects the hands carry, which are known) and in the true scene.
+   Both plans are checked by the same independent dense check against the **true** primitives
+   (``benchmarks/_peer.dense_check``).
 
 Run: ``python -m benchmarks.bench_perception [--problems 100] [--quick]``.
 """
@@ -23,6 +25,7 @@ Run: ``python -m benchmarks.bench_perception [--problems 100] [--quick]``.
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import time
@@ -43,8 +46,10 @@ from taplan.scene.scan import perceive, scan_configurations
 
 MAX_TIME = 10.0  # [s] per plan: plan_motion's default budget (wall clock)
 SCAN_CAMERA = PinholeCamera(160, 120, 84.25, 84.25, 80.0, 60.0)  # the wrist camera's field of view, 1/4 size
-THICKNESS = 0.04  # [m] surfaces taken as solids this thick
+RESOLUTION = 0.01  # [m] voxel edge: a voxel overstates a surface by up to its edge, starts keep 1.5 cm
 SCAN_VIEWS, SCAN_SAMPLES = 8, 150  # views per wrist camera, chosen among this many seeded arm poses
+FOCUS_WEIGHT = 10.0  # the task's space weighs this much more than the rest of the workspace in the view choice
+FOCUS_STEPS = (1.0,)  # the task's space: the arm's at these fractions of the straight joint segment to the goal
 
 
 def _cpu_calls(func: Any, repeats: int, warmup: int) -> dict[str, float]:
@@ -167,9 +172,19 @@ def bench_distance(robot: taplan.Robot, repeats: int) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------------------------- planning
 def _perceived_scene(robot: taplan.Robot, problem: Any) -> tuple[Scene, float]:
     start = time.perf_counter()
-    probe = Perception(robot, cameras=dict(TELEAVATAR_CAMERAS))
-    views = scan_configurations(probe, problem.scene, count=SCAN_VIEWS, samples=SCAN_SAMPLES, seed=problem.index)
-    perception = perceive(robot, problem.scene, views, camera=SCAN_CAMERA, seed=problem.index, thickness=THICKNESS)
+    probe = Perception(robot, cameras=dict(TELEAVATAR_CAMERAS), unknown="free", resolution=RESOLUTION)
+    views = scan_configurations(
+        probe,
+        problem.scene,
+        count=SCAN_VIEWS,
+        samples=SCAN_SAMPLES,
+        seed=problem.index,
+        focus=[problem.start + a * (problem.goal_q - problem.start) for a in FOCUS_STEPS],
+        focus_weight=FOCUS_WEIGHT,
+    )
+    perception = perceive(robot, problem.scene, views, camera=SCAN_CAMERA, seed=problem.index, resolution=RESOLUTION)
+    perception.mark_robot_free(problem.start)  # the robot stands at the start: that space is known free
+    perception.update_scene()
     scene = perception.scene
     for name, item in problem.scene.attached.items():  # what the hands carry is known, not seen
         scene.attach(name, item.shape, item.frame, item.pose)
@@ -177,22 +192,38 @@ def _perceived_scene(robot: taplan.Robot, problem: Any) -> tuple[Scene, float]:
 
 
 def _plan(robot: taplan.Robot, world: CollisionWorld, truth: tuple[CollisionWorld, Any], problem: Any) -> dict:
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     try:
         plan = plan_motion(robot, problem.start, problem.goal, world=world, max_time=MAX_TIME, seed=problem.index)
     except TaplanError as exc:
-        return {"success": False, "time": time.perf_counter() - start, "error": type(exc).__name__ + ": " + str(exc)}
-    elapsed = time.perf_counter() - start
+        return {
+            "success": False,
+            "time": time.perf_counter() - start,
+            "cpu": time.process_time() - cpu,
+            "error": type(exc).__name__ + ": " + str(exc),
+        }
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
     trajectory = plan.trajectory
     index = np.arange(robot.nq)
     collisions, clearance = dense_check(truth[1], truth[0], trajectory, trajectory.duration, problem.start, index)
-    return {"success": True, "time": elapsed, "collisions": collisions, "true_clearance": clearance}
+    return {"success": True, "time": elapsed, "cpu": cpu, "collisions": collisions, "true_clearance": clearance}
 
 
-def bench_planning(robot: taplan.Robot, count: int, partial: Any = None) -> dict[str, Any]:
-    """Plan every problem in both scenes; ``partial(rows)`` is called after each problem (results so far)."""
-    rows: list[dict[str, Any]] = []
-    for problem in problems(count, seed=7):
+def bench_planning(
+    robot: taplan.Robot,
+    count: int,
+    partial: Any = None,
+    shard: tuple[int, int] = (0, 1),
+    done: list[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """Plan every problem in both scenes; ``partial(rows)`` is called after each problem (results so far).
+    ``shard`` ``(k, n)``: only the problems whose index is ``k`` modulo ``n`` (runs split over processes);
+    ``done``: rows of an earlier, interrupted run (their problems are skipped)."""
+    rows: list[dict[str, Any]] = list(done or [])
+    skip = {r["index"] for r in rows}
+    for problem in problems(count, seed=7)[shard[0] :: shard[1]]:
+        if problem.index in skip:
+            continue
         truth_world = CollisionWorld(robot, problem.scene)
         truth = (truth_world, CompiledScene(truth_world))
         scene, perceive_time = _perceived_scene(robot, problem)
@@ -200,12 +231,14 @@ def bench_planning(robot: taplan.Robot, count: int, partial: Any = None) -> dict
         perceived = _plan(robot, seen_world, truth, problem)
         primitive = _plan(robot, truth_world, truth, problem)
         voxels = len(scene.obstacles["perceived"].shape) if "perceived" in scene.obstacles else 0
+        unknown = len(scene.obstacles["perceived_unknown"].shape) if "perceived_unknown" in scene.obstacles else 0
         rows.append(
             {
                 "family": problem.family,
                 "index": problem.index,
                 "kind": problem.kind,
                 "voxels": voxels,
+                "unknown_voxels": unknown,
                 "perceive_time": perceive_time,
                 "perceived": perceived,
                 "true": primitive,
@@ -229,11 +262,34 @@ def _summary(rows: list[dict]) -> dict[str, Any]:
         }
     both = [r for r in rows if r["perceived"]["success"] and r["true"]["success"]]
     if both:
-        out["median_time_ratio_same_problems"] = float(
-            np.median([r["perceived"]["time"] for r in both]) / np.median([r["true"]["time"] for r in both])
-        )
+        for key, suffix in (("time", ""), ("cpu", "_cpu")):
+            out["median_time_ratio_same_problems" + suffix] = float(
+                np.median([r["perceived"][key] for r in both]) / np.median([r["true"][key] for r in both])
+            )
+        out["p95_time_same_problems"] = {
+            key: float(np.percentile([r[key]["time"] for r in both], 95)) for key in ("perceived", "true")
+        }
+    families: dict[str, Any] = {}
+    for family in dict.fromkeys(r["family"] for r in rows):
+        mine = [r for r in rows if r["family"] == family]
+        pair = [r for r in mine if r["perceived"]["success"] and r["true"]["success"]]
+        families[family] = {
+            "count": len(mine),
+            **{f"{key}_success": sum(r[key]["success"] for r in mine) for key in ("perceived", "true")},
+            **{
+                f"{key}_collisions": sum(r[key]["success"] and r[key]["collisions"] > 0 for r in mine)
+                for key in ("perceived", "true")
+            },
+            "median_time_ratio": float(
+                np.median([r["perceived"]["time"] for r in pair]) / np.median([r["true"]["time"] for r in pair])
+            )
+            if pair
+            else float("nan"),
+        }
+    out["families"] = families
     out["median_perceive_time"] = float(np.median([r["perceive_time"] for r in rows]))
     out["median_voxels"] = float(np.median([r["voxels"] for r in rows]))
+    out["median_unknown_voxels"] = float(np.median([r.get("unknown_voxels", 0) for r in rows]))
     return out
 
 
@@ -285,14 +341,44 @@ def markdown(results: dict[str, Any], note: str) -> str:
     return "\n".join(lines)
 
 
+SHARDS = _harness.RESULTS_DIR / "shards"
+
+
+def _shard(text: str) -> tuple[int, int]:
+    k, _, n = text.partition("/")
+    if not (k.isdigit() and n.isdigit() and 0 <= int(k) < int(n)):
+        raise argparse.ArgumentTypeError(f"expected K/N with 0 <= K < N, received {text!r}")
+    return int(k), int(n)
+
+
+def _shard_path(k: int, n: int) -> Any:
+    return SHARDS / f"perception-planning-{k}-of-{n}.json"
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--problems", type=int, default=100, help="planning problems (default 100)")
     parser.add_argument("--quick", action="store_true", help="10 problems, fewer repeats")
     parser.add_argument("--skip-planning", action="store_true")
+    parser.add_argument(
+        "--shard", type=_shard, help="K/N: plan only problems K, K+N, ... (saved to results/shards/ after each)"
+    )
+    parser.add_argument("--merge", type=int, metavar="N", help="merge the N planning shards into the report")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     robot = taplan.Robot.teleavatar()
+    if args.shard is not None:  # planning only, one part of the problems
+        k, n = args.shard
+        SHARDS.mkdir(parents=True, exist_ok=True)
+
+        def save_shard(rows: list[dict[str, Any]]) -> None:
+            payload = {"shard": [k, n], "problems": args.problems, "load_average_now": os.getloadavg()[0]}
+            _shard_path(k, n).write_text(json.dumps({**payload, "rows": rows}, indent=1, default=float))
+
+        path = _shard_path(k, n)
+        done = json.loads(path.read_text())["rows"] if path.is_file() else []  # resume an interrupted run
+        bench_planning(robot, args.problems, save_shard, (k, n), done)
+        return
     repeats = 10 if args.quick else 40
     results: dict[str, Any] = {"load_average": os.getloadavg()[0], "quick": args.quick}
     results["integration"] = bench_integration(robot, repeats)
@@ -304,7 +390,14 @@ def main(argv: list[str] | None = None) -> None:
         results["load_average_now"] = os.getloadavg()[0]
         _harness.save("perception", results, markdown(results, note))
 
-    if not args.skip_planning:
+    if args.merge:
+        rows = []
+        for k in range(args.merge):
+            rows += json.loads(_shard_path(k, args.merge).read_text())["rows"]
+        rows.sort(key=lambda r: r["index"])
+        partial(rows)
+        note += f" Planning run in {args.merge} processes (`--shard K/{args.merge}`), merged: {len(rows)} problems."
+    elif not args.skip_planning:
         results["planning"] = bench_planning(robot, 10 if args.quick else args.problems, partial)
     text = markdown(results, note)
     _harness.save("perception", results, text)

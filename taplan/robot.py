@@ -183,7 +183,13 @@ class Robot:
             "left": ([f"l_joint{i}" for i in range(1, 8)], "left_ee", "left_shoulder_base"),
             "right": ([f"r_joint{i}" for i in range(1, 8)], "right_ee", "right_shoulder_base"),
         }
-        return cls(urdf_path, limits=limits, groups=groups, home=home)
+        robot = cls(urdf_path, limits=limits, groups=groups, home=home)
+        # the wrist depth cameras' frames now, before any pinocchio Data is made from the model (adding a frame later
+        # leaves earlier Data too small: a CollisionWorld's or an IK's would write past its end)
+        from taplan.scene.camera import add_camera_frames
+
+        add_camera_frames(robot)
+        return robot
 
     # ------------------------------------------------------------------------------------------------- properties
     @property

@@ -181,5 +181,7 @@ def _camera_monitors(args: argparse.Namespace, interface: Any, robot: Any) -> tu
     from taplan.ros.perception_link import PerceptionLink
     from taplan.scene import Perception
 
-    link = PerceptionLink(interface, Perception(robot), stale_after=args.camera_timeout)
+    # the run plans nothing in this scene (it records the images and watches the stream): no unknown-space
+    # tracking, whose projections and snapshots would cost the control loop tens of milliseconds per image
+    link = PerceptionLink(interface, Perception(robot, unknown="free"), stale_after=args.camera_timeout)
     return (link.monitor,)

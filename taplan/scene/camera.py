@@ -248,12 +248,26 @@ WRIST_DEPTH_CAMERA = PinholeCamera(640, 480, 337.0, 337.0, 320.0, 240.0)
 
 
 def add_camera_frames(robot: Any, mounts: dict[str, CameraMount] | None = None) -> dict[str, CameraMount]:
-    """Add each mount as a frame of ``robot`` (default: the TeleAvatar's wrist cameras); frames already there are
-    kept. Returns the mounts."""
+    """Make each mount a frame of ``robot`` (default: the TeleAvatar's wrist cameras): a frame already there (the
+    TeleAvatar's model has its wrist cameras from :meth:`taplan.Robot.teleavatar`) is moved to the mount in place; a
+    new name is added. Returns the mounts.
+
+    Adding a frame changes the model's size: pinocchio ``Data`` made from the model before (a ``CollisionWorld``'s,
+    an IK's) is then too small for it, and using it writes past its end. Moving a frame does not; so add new camera
+    frames before anything else is built on the robot."""
+    import pinocchio as pin
+
     mounts = TELEAVATAR_CAMERAS if mounts is None else mounts
     for mount in mounts.values():
         if mount.name not in robot.frame_names:
             robot.add_frame(mount.name, mount.parent, mount.T_parent_camera)
+            continue
+        parent = robot.model.frames[robot.frame_id(mount.parent)]
+        placement = parent.placement * pin.SE3(np.asarray(mount.T_parent_camera, dtype=float))
+        frame = pin.Frame(
+            mount.name, parent.parentJoint, robot.frame_id(mount.parent), placement, pin.FrameType.OP_FRAME
+        )
+        robot.model.frames[robot.frame_id(mount.name)] = frame
     return dict(mounts)
 
 

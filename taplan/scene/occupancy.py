@@ -5,6 +5,14 @@
 the occupied voxels whose centre it sees through (:meth:`OccupancyGrid.clear_seen_through`), and with ``decay`` [s]
 voxels not seen again for that long are dropped.
 
+Inside a ``region`` box (the workspace) the grid also keeps which voxels are *known free*: a depth image sees past
+the voxel's centre (:meth:`OccupancyGrid.mark_seen_free`), or the robot's own bodies stood there
+(:meth:`OccupancyGrid.mark_free`). Every other voxel of the region that is not occupied is *unknown*
+(:meth:`OccupancyGrid.unknown_snapshot`). Of those it also keeps which were ever inside an image's view
+(``viewed``) and which lay behind a surface an image saw (``shadowed``): the unknown voxels never viewed or
+shadowed are ``unknown_snapshot("occluded")``; the others were viewed only through pixels that measured nothing or
+that the caller ignores (the robot's own bodies).
+
 :class:`Occupancy` is a snapshot of the map as a scene shape: every occupied voxel is an axis-aligned box of edge
 ``resolution`` in the obstacle's frame. :class:`~taplan.scene.CollisionWorld` asks it for capsule distances
 (:meth:`Occupancy.capsule_distances`): per robot body the exact distance to the nearest voxel box. The voxels are
@@ -330,6 +338,19 @@ class Occupancy(Shape):
         return d
 
 
+def _nearest_around(depth: np.ndarray) -> np.ndarray:
+    """Per pixel the smallest valid depth of its 3x3 neighbourhood (NaN where none is valid)."""
+    padded = np.pad(np.where(np.isfinite(depth), depth, np.inf), 1, constant_values=np.inf)
+    H, W = depth.shape
+    out = padded[1 : H + 1, 1 : W + 1].copy()
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            if (di, dj) != (1, 1):
+                np.minimum(out, padded[di : di + H, dj : dj + W], out=out)
+    out[np.isinf(out)] = np.nan
+    return out
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(v, axis=1, keepdims=True)
     return np.where(norm > 1e-12, v / np.maximum(norm, 1e-12), [0.0, 0.0, 1.0])
@@ -342,7 +363,9 @@ class OccupancyGrid:
         resolution: Voxel edge [m] (default 2 cm).
         bounds: ``(low corner, high corner)`` [m] of the mapped box; points outside are counted in
             ``dropped_outside`` and ignored.
-        decay: Seconds after which a voxel not seen again is dropped (None: never).
+        decay: Seconds after which a voxel not seen again is dropped (None: never; it becomes unknown, not free).
+        region: ``(low corner, high corner)`` [m] of the box where known-free space is tracked (None: nowhere, no
+            voxel is ever unknown).
     """
 
     def __init__(
@@ -351,6 +374,7 @@ class OccupancyGrid:
         bounds: Any = DEFAULT_BOUNDS,
         *,
         decay: float | None = None,
+        region: Any = None,
     ) -> None:
         self.resolution = _resolution(resolution)
         self.origin, high = _bounds(bounds)
@@ -367,6 +391,53 @@ class OccupancyGrid:
         self._strides = np.array([self.shape[1] * self.shape[2], self.shape[2], 1], dtype=np.int64)
         self.dropped_outside = 0
         self.version = 0
+        self.free = np.zeros(cells, dtype=bool)  # known free (seen through, or the robot stood there)
+        self.viewed = np.zeros(cells, dtype=bool)  # inside an image's view (within its range) at least once
+        self.shadowed = np.zeros(cells, dtype=bool)  # an image saw a surface in front of it
+        self._set_region(region)
+
+    def _set_region(self, region: Any) -> None:
+        """The voxels whose known-free state is tracked: those whose box lies in ``region`` (clipped to the bounds),
+        with their centres (float32, for projecting them into images)."""
+        self.region = None if region is None else _bounds(region)
+        if self.region is None:
+            self._region_keys = np.zeros(0, dtype=np.int64)
+            self._region_centres = np.zeros((0, 3), dtype=np.float32)
+            return
+        lo, hi = self.region
+        first = np.maximum(np.ceil((lo - self.origin) / self.resolution - 1e-9).astype(np.int64), 0)
+        last = np.minimum(np.floor((hi - self.origin) / self.resolution + 1e-9).astype(np.int64), self.shape)
+        if np.any(last <= first):
+            raise InvalidInputError("region", region, "a box that holds at least one voxel of the grid's bounds")
+        i, j, k = np.meshgrid(*(np.arange(a, b) for a, b in zip(first, last, strict=True)), indexing="ij")
+        index = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1)
+        # sorted by BLOCK^3-voxel block, so an image projects only the blocks its view cone can hold
+        block = (index - first) // BLOCK
+        order = np.lexsort((block[:, 2], block[:, 1], block[:, 0]))
+        index, block = index[order], block[order]
+        self._region_keys = index @ self._strides
+        self._region_centres = (self.origin + (index + 0.5) * self.resolution).astype(np.float32)
+        new = np.r_[True, np.any(block[1:] != block[:-1], axis=1)]
+        starts = np.flatnonzero(new)
+        self._region_counts = np.diff(np.r_[starts, len(index)])
+        lo_corner = np.minimum.reduceat(self._region_centres, starts, axis=0).astype(float)
+        hi_corner = np.maximum.reduceat(self._region_centres, starts, axis=0).astype(float)
+        self._region_block_centre = (lo_corner + hi_corner) / 2
+        self._region_block_radius = np.linalg.norm(hi_corner - lo_corner, axis=1) / 2 + self.resolution
+
+    def _region_in_view(
+        self, camera_centre: np.ndarray, axis: np.ndarray, half_angle: float, reach: float
+    ) -> np.ndarray:
+        """Mask of the region's voxels in blocks that may lie in a view cone (apex ``camera_centre``, unit ``axis``,
+        ``half_angle`` [rad]) within ``reach`` [m]: a cheap superset of the voxels an image can see."""
+        offset = self._region_block_centre - camera_centre
+        distance = np.linalg.norm(offset, axis=1)
+        radius = self._region_block_radius
+        with np.errstate(invalid="ignore", divide="ignore"):
+            angle = np.arccos(np.clip(offset @ axis / distance, -1.0, 1.0))
+            widen = np.arcsin(np.clip(radius / distance, 0.0, 1.0))
+        ok = (distance <= radius) | ((angle <= half_angle + widen) & (distance - radius <= reach))
+        return np.repeat(ok, self._region_counts)
 
     def __len__(self) -> int:
         return int(np.count_nonzero(self.occupied))
@@ -408,6 +479,7 @@ class OccupancyGrid:
             keys = keys[~self._scratch[keys]]
             self._scratch[exclude] = False
         self.occupied[keys] = True
+        self.free[keys] = False  # what was hit is not known free (after ``decay`` it is unknown again)
         if self.seen is not None:
             self.seen[keys] = stamp
         self.version += 1
@@ -474,19 +546,104 @@ class OccupancyGrid:
             keys = keys[~self._scratch[keys]]
             self._scratch[exclude] = False
         self.occupied[keys] = True
+        self.free[keys] = False
         if self.seen is not None:
             self.seen[keys] = stamp
         self.version += 1
         return measured, kept_pixels
 
     def clear_keys(self, keys: np.ndarray) -> None:
+        """Free these voxels (seen through: known free)."""
         self.occupied[keys] = False
+        self.free[keys] = True
         self.version += 1
 
     def clear(self) -> None:
-        """Forget everything."""
+        """Forget everything (every voxel of the region unknown again)."""
         self.occupied[:] = False
+        self.free[:] = False
+        self.viewed[:] = False
+        self.shadowed[:] = False
         self.version += 1
+
+    def mark_free(self, keys: np.ndarray) -> int:
+        """Mark these voxels known free unless they are occupied (e.g. the space the robot's bodies fill: nothing
+        else can be there). Returns how many changed."""
+        keys = np.asarray(keys, dtype=np.int64)
+        new = keys[~(self.occupied[keys] | self.free[keys])]
+        if len(new):
+            self.free[new] = True
+            self.version += 1
+        return len(np.unique(new))
+
+    def mark_seen_free(
+        self,
+        depth: np.ndarray,
+        intrinsics: tuple[float, float, float, float],
+        T_root_camera: np.ndarray,
+        margin: float,
+        *,
+        max_range: float = math.inf,
+        ignore: np.ndarray | None = None,
+    ) -> int:
+        """Update the region's unknown voxels from a depth image (metres, NaN = no measurement). Each voxel is
+        judged by the nearest valid depth of the 3x3 pixels around its centre's (a missing pixel, or a voxel wider
+        than a pixel, hides nothing): known free when that depth is more than ``margin`` [m] beyond the centre (the
+        whole box is in front of the surface when ``margin`` is at least half the voxel's diagonal);
+        ``shadowed`` when it is not (a surface is in front of the voxel or in it); ``viewed`` when the centre
+        projects into the image within ``max_range`` (a voxel viewed only through pixels without any measurement
+        around them, looking into nothing, is neither). ``ignore``: a mask of pixels taken as no measurement (the
+        robot's own bodies: they free nothing and, in this mode, shadow nothing). Returns how many became known
+        free."""
+        keys = self._region_keys
+        if not len(keys):
+            return 0
+        fx, fy, cx, cy = intrinsics
+        H, W = depth.shape
+        corner = max(abs(cx), abs(W - cx)) / fx, max(abs(cy), abs(H - cy)) / fy
+        half_angle = math.atan(math.hypot(*corner))  # the cone around the image's frustum
+        candidates = self._region_in_view(T_root_camera[:3, 3], T_root_camera[:3, 2], half_angle, max_range)
+        unknown = candidates & ~(self.occupied[keys] | self.free[keys])
+        keys, centres = keys[unknown], self._region_centres[unknown]
+        if not len(keys):
+            return 0
+        R, t = T_root_camera[:3, :3].astype(np.float32), T_root_camera[:3, 3].astype(np.float32)
+        local = (centres - t) @ R  # camera frame
+        z = local[:, 2]
+        ahead = np.flatnonzero((z > 1e-3) & (z <= max_range))
+        z = z[ahead]
+        u = np.floor(np.float32(fx) * local[ahead, 0] / z + np.float32(cx))
+        v = np.floor(np.float32(fy) * local[ahead, 1] / z + np.float32(cy))
+        inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
+        rows, z = ahead[inside], z[inside]
+        pixel = v[inside].astype(np.int64) * W + u[inside].astype(np.int64)
+        if ignore is not None:
+            depth = np.where(ignore, np.nan, depth)
+        measured = _nearest_around(depth).reshape(-1)[pixel]
+        self.viewed[keys[rows]] = True
+        finite = np.isfinite(measured)
+        seen = finite & (measured > z + np.float32(margin))
+        self.shadowed[keys[rows[finite & ~seen]]] = True
+        found = keys[rows[seen]]
+        self.free[found] = True
+        self.version += 1
+        return len(found)
+
+    def unknown_keys(self, which: str = "all") -> np.ndarray:
+        """Keys of the region's voxels neither occupied nor known free: ``"all"`` of them, or ``"occluded"``: those
+        never inside an image's view or behind a surface an image saw."""
+        keys = self._region_keys
+        keys = keys[~(self.occupied[keys] | self.free[keys])]
+        if which == "occluded":
+            keys = keys[self.shadowed[keys] | ~self.viewed[keys]]
+        elif which != "all":
+            raise InvalidInputError("which", which, "'all' or 'occluded'")
+        return keys
+
+    def unknown_snapshot(self, which: str = "all") -> Occupancy:
+        """The region's unknown voxels now (:meth:`unknown_keys`), as an obstacle shape in the root frame (what a
+        conservative planner treats as occupied)."""
+        return Occupancy(self.resolution, self.origin.copy(), self.indices(self.unknown_keys(which)))
 
     def clear_seen_through(
         self,

@@ -8,6 +8,12 @@ An image is placed by the camera's pose at its capture time: forward kinematics 
 configuration the robot had then (:class:`JointHistory` interpolates recorded joint states). Before its points are
 inserted, the voxels the image sees through are freed, and points on the robot's own bodies (each capsule plus
 ``padding``, at that configuration) are dropped. The core is pure: time is a parameter, nothing runs by itself.
+
+Unseen space is not free space. Inside ``workspace`` every voxel is occupied, known free (an image saw past it, or
+the robot's own padded bodies filled it at a capture configuration or at :meth:`Perception.mark_robot_free`) or
+unknown. With ``unknown="occupied"`` (the default) the unknown voxels are a second obstacle, ``<name>_unknown``, so a
+plan stays in space a camera has seen (MoveIt's and cuRobo's treatment of unknown space); ``unknown="free"`` keeps
+only what was hit.
 """
 
 from __future__ import annotations
@@ -29,7 +35,11 @@ from taplan.scene.pointcloud import cloud_to_points
 from taplan.scene.robot_bodies import robot_bodies
 from taplan.scene.scene import Scene, as_pose
 
-__all__ = ["Perception", "JointHistory", "Integration"]
+__all__ = ["Perception", "JointHistory", "Integration", "DEFAULT_WORKSPACE"]
+
+# where the TeleAvatar's hands work, in front of its chest (root frame) [m]: unknown space counts there
+DEFAULT_WORKSPACE = ((0.2, -0.7, -0.7), (1.0, 0.7, 0.2))
+UNKNOWN = ("occupied", "occluded", "free")
 
 
 class JointHistory:
@@ -106,6 +116,11 @@ class Perception:
             that thick; 0: the hit's voxel only).
         cameras: Mounts to add as frames (default: the TeleAvatar's wrist cameras when the model is the
             TeleAvatar's, else none).
+        unknown: ``"occupied"``: the voxels of ``workspace`` no image has seen past (and the robot never filled)
+            are obstacle ``<name>_unknown`` of the scene; ``"free"``: unseen space is free (only hits block).
+        workspace: The box [m, root frame] where unknown space counts (default :data:`DEFAULT_WORKSPACE`).
+        free_margin: A voxel is known free when an image sees at least this much beyond its centre [m] (default
+            half its diagonal: its whole box is in front of the surface).
     """
 
     def __init__(
@@ -123,7 +138,12 @@ class Perception:
         decay: float | None = None,
         thickness: float = 0.0,
         cameras: dict[str, CameraMount] | None = None,
+        unknown: str = "occluded",
+        workspace: Any = DEFAULT_WORKSPACE,
+        free_margin: float | None = None,
     ) -> None:
+        if unknown not in UNKNOWN:
+            raise InvalidInputError("unknown", unknown, f"one of {UNKNOWN}")
         if not (isinstance(padding, (int, float)) and math.isfinite(padding) and padding >= 0):
             raise InvalidInputError("padding", padding, "a distance >= 0 [m]")
         if not (0 <= min_range < max_range) or not math.isfinite(min_range):
@@ -131,13 +151,18 @@ class Perception:
         self.robot = robot
         self.scene = scene if scene is not None else Scene()
         self.name = name
-        self.grid = OccupancyGrid(resolution, bounds, decay=decay)
+        self.unknown = unknown
+        self.grid = OccupancyGrid(resolution, bounds, decay=decay, region=workspace if unknown != "free" else None)
         self.padding = float(padding)
         if not (isinstance(thickness, (int, float)) and 0 <= thickness <= 1):
             raise InvalidInputError("thickness", thickness, "a depth in [0, 1] m")
         self.thickness = float(thickness)
         self.min_range, self.max_range = float(min_range), float(max_range)
         self.clear_margin = 2 * self.grid.resolution if clear_margin is None else float(clear_margin)
+        half_diagonal = self.grid.resolution * math.sqrt(3) / 2
+        self.free_margin = half_diagonal if free_margin is None else float(free_margin)
+        if not (math.isfinite(self.free_margin) and self.free_margin >= 0):
+            raise InvalidInputError("free_margin", free_margin, "a distance >= 0 [m]")
         if cameras is None:
             cameras = TELEAVATAR_CAMERAS if {"Link-L7", "Link-R7"} <= set(robot.frame_names) else {}
         self.cameras = add_camera_frames(robot, cameras)
@@ -176,6 +201,24 @@ class Perception:
             self._fixed_keys = self.grid.near_segments(starts[fixed], ends[fixed], radii[fixed] + self.padding)
         moving = self.grid.near_segments(starts[~fixed], ends[~fixed], radii[~fixed] + self.padding)
         return np.concatenate([self._fixed_keys, moving])
+
+    def _own_pixels(self, depth: np.ndarray, camera: PinholeCamera, T: np.ndarray, own: np.ndarray) -> np.ndarray:
+        """Mask of the pixels whose measured point lies in the robot's own (padded) space ``own`` (voxel keys)."""
+        valid = np.isfinite(depth)
+        points = camera.points(depth) @ T[:3, :3].T + T[:3, 3]
+        keys, inside = self.grid.keys(points)
+        mine = np.zeros(self.grid.occupied.shape, dtype=bool)
+        mine[own] = True
+        hit = np.zeros(len(points), dtype=bool)
+        hit[np.flatnonzero(inside)] = mine[keys]
+        mask = np.zeros(depth.shape, dtype=bool)
+        mask[valid] = hit
+        return mask
+
+    def mark_robot_free(self, q: npt.ArrayLike) -> int:
+        """Mark known free the space of the robot's bodies (plus ``padding``) at ``q``: the robot stands there, so
+        nothing else does (the configuration a plan starts from). Returns how many voxels were unknown."""
+        return self.grid.mark_free(self._own_voxels(self.robot.check_configuration(q)))
 
     def _pose(self, frame: str | None, T: Any, q: np.ndarray, what: str) -> np.ndarray:
         if T is not None:
@@ -228,15 +271,24 @@ class Perception:
         T = self._pose(frame, T_root_camera, q_capture, "T_root_camera")
         cleared = self.grid.clear_seen_through(depth, camera.intrinsics, T, self.clear_margin)
         ray_x, ray_y = camera.ray_components()
+        own = self._own_voxels(q_capture)
         measured, kept = self.grid.insert_image(
             depth,
             ray_x,
             ray_y,
             T,
             0.0 if stamp is None else stamp,
-            exclude=self._own_voxels(q_capture),
+            exclude=own,
             thickness=self.thickness,
         )
+        if self.unknown != "free":
+            # "occluded": what the robot's own bodies hide counts as viewed, not as hidden (the wrist camera's own
+            # gripper fills a quarter of every image); "occupied" counts only what was seen past
+            ignore = self._own_pixels(depth, camera, T, own) if self.unknown == "occluded" else None
+            self.grid.mark_seen_free(
+                depth, camera.intrinsics, T, self.free_margin, max_range=self.max_range, ignore=ignore
+            )
+        self.grid.mark_free(own)  # the robot filled its own space when the image was taken
         return Integration(measured, kept, cleared, T)
 
     def integrate_points(
@@ -250,7 +302,8 @@ class Perception:
     ) -> Integration:
         """Fuse a point cloud (N, 3) [m] given in ``frame`` (a robot frame posed by FK at the capture configuration;
         the root frame when neither ``frame`` nor ``T_root_frame`` is given). NaN points are skipped. Clouds add
-        occupancy only; use ``decay`` to forget what is no longer there."""
+        occupancy only (a cloud has no rays: it marks no space known free, except the robot's own); use ``decay``
+        to forget what is no longer there."""
         P = np.asarray(points, dtype=float)
         if P.ndim != 2 or P.shape[1] != 3:
             raise InvalidInputError("points", f"shape {P.shape}", "(N, 3) positions [m]")
@@ -261,7 +314,9 @@ class Perception:
             else self._pose(frame, T_root_frame, q_capture, "T_root_frame")
         )
         world = P @ T[:3, :3].T + T[:3, 3]
-        kept = self.grid.insert(world, 0.0 if stamp is None else stamp, exclude=self._own_voxels(q_capture))
+        own = self._own_voxels(q_capture)
+        kept = self.grid.insert(world, 0.0 if stamp is None else stamp, exclude=own)
+        self.grid.mark_free(own)
         return Integration(len(P), kept, 0, T)
 
     def integrate_image(
@@ -328,12 +383,21 @@ class Perception:
     def occupancy(self) -> Occupancy:
         return self.grid.snapshot()
 
+    @property
+    def unknown_name(self) -> str:
+        """The scene obstacle of the workspace's unknown voxels (with ``unknown="occupied"``)."""
+        return self.name + "_unknown"
+
     def update_scene(self) -> Occupancy | None:
-        """Put the occupied voxels into the scene as obstacle ``name`` (only when the grid changed). Returns the
-        new shape, or None when nothing changed."""
+        """Put the occupied voxels into the scene as obstacle ``name`` and, with ``unknown="occupied"``, the
+        workspace's unknown voxels as obstacle :attr:`unknown_name` (only when the grid changed). Returns the new
+        occupied shape, or None when nothing changed."""
         if self.grid.version == self._published:
             return None
         shape = self.grid.snapshot()
         self.scene.put(self.name, shape)
+        if self.unknown != "free":
+            which = "all" if self.unknown == "occupied" else "occluded"
+            self.scene.put(self.unknown_name, self.grid.unknown_snapshot(which))
         self._published = self.grid.version
         return shape

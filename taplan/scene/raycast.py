@@ -106,6 +106,23 @@ def _cone(rays: np.ndarray, lengths: np.ndarray, eye: np.ndarray, centre: np.nda
     return np.flatnonzero(cosine >= math.sqrt(max(0.0, 1.0 - (radius / distance) ** 2)) - 1e-9)
 
 
+def _segment_frame(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, float]:
+    """A frame at the segment's middle with z along it, and its length (cross products written out: np.cross
+    costs more than the rest of a small capsule's rendering)."""
+    axis = end - start
+    length = math.sqrt(float(axis @ axis))
+    z = axis / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])
+    if abs(z[0]) < 0.9:  # x = e_x × z
+        x = np.array([0.0, -z[2], z[1]])
+    else:  # x = e_y × z
+        x = np.array([z[2], 0.0, -z[0]])
+    x /= math.sqrt(float(x @ x))
+    y = np.array([z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0]])
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, (start + end) / 2
+    return T, length
+
+
 def render_depth(
     camera: PinholeCamera,
     T_root_camera: np.ndarray,
@@ -148,14 +165,7 @@ def render_depth(
         hit(obstacle.shape, obstacle.pose, obstacle.shape.bounding_radius(), obstacle.name)
     for start, end, radius in capsules:
         start, end = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
-        axis = end - start
-        length = float(np.linalg.norm(axis))
-        z = axis / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])
-        x = np.cross([1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0], z)
-        x /= np.linalg.norm(x)
-        T = np.eye(4)
-        T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-        T[:3, 3] = (start + end) / 2
+        T, length = _segment_frame(start, end)
         shape = Capsule(float(radius), length) if length > 1e-9 else Sphere(float(radius))
         hit(shape, T, float(radius) + length / 2, "capsule")
     depth[depth > max_range] = np.inf

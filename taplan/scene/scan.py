@@ -14,22 +14,42 @@ from typing import Any
 import numpy as np
 
 from taplan.scene.camera import TELEAVATAR_CAMERAS, WRIST_DEPTH_CAMERA, PinholeCamera
-from taplan.scene.perception import Perception
+from taplan.scene.perception import DEFAULT_WORKSPACE, Perception
 from taplan.scene.raycast import render_depth
 from taplan.scene.scene import Scene
 
 __all__ = ["scan_configurations", "perceive", "WORKSPACE"]
 
-WORKSPACE = ((0.2, -0.7, -0.7), (1.0, 0.7, 0.2))  # [m] in front of the TeleAvatar, root frame
+WORKSPACE = DEFAULT_WORKSPACE  # [m] in front of the TeleAvatar, root frame
 _PROBE = PinholeCamera(32, 24, 16.85, 16.85, 16.0, 12.0)  # the wrist camera's field of view at 1/20 resolution
+MAX_FOCUS_POINTS = 4000  # voxels of a focus configuration's bodies scored per view (a seeded subset)
 
 
-def _seen_cells(depth: np.ndarray, camera: PinholeCamera, T: np.ndarray, box: tuple[Any, Any], cell: float) -> set:
-    """The ``cell``-sized cells of the box that the image's hits fall in."""
-    points = camera.points(depth) @ T[:3, :3].T + T[:3, 3]
-    lo, hi = np.asarray(box[0]), np.asarray(box[1])
-    points = points[np.all((points >= lo) & (points <= hi), axis=1)]
-    return set(map(tuple, np.floor((points - lo) / cell).astype(int).tolist()))
+def _cell_centres(workspace: tuple[Any, Any], cell: float) -> np.ndarray:
+    lo, hi = np.asarray(workspace[0], dtype=float), np.asarray(workspace[1], dtype=float)
+    axes = [np.arange(a + cell / 2, b, cell) for a, b in zip(lo, hi, strict=True)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def _seen_cells(
+    depth: np.ndarray, camera: PinholeCamera, T: np.ndarray, centres: np.ndarray, slack: np.ndarray
+) -> np.ndarray:
+    """Which points (centres (M, 3)) an image sees: the ray through the point's pixel reaches at least to the point's
+    depth plus its ``slack`` [m] (M,) (negative for a cell: seen free or its surface seen; positive for a voxel that
+    must be seen past to be known free)."""
+    local = (centres - T[:3, 3]) @ T[:3, :3]
+    z = local[:, 2]
+    ahead = z > 1e-3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.floor(camera.fx * local[:, 0] / z + camera.cx)
+        v = np.floor(camera.fy * local[:, 1] / z + camera.cy)
+    inside = ahead & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+    seen = np.zeros(len(centres), dtype=bool)
+    rows = np.flatnonzero(inside)
+    measured = depth[v[rows].astype(int), u[rows].astype(int)]
+    with np.errstate(invalid="ignore"):
+        seen[rows] = measured >= z[rows] + slack[rows]
+    return seen
 
 
 def scan_configurations(
@@ -41,15 +61,32 @@ def scan_configurations(
     seed: int = 0,
     workspace: tuple[Any, Any] = WORKSPACE,
     cell: float = 0.05,
+    focus: Any = (),
+    focus_weight: float = 10.0,
 ) -> list[tuple[str, np.ndarray]]:
     """Up to ``count`` ``(camera frame, configuration)`` per wrist camera, chosen greedily among ``samples`` seeded
-    draws of that arm (the other at home) within the planning limits: each next view is the one whose hits cover
-    the most ``cell``-sized cells [m] of ``workspace`` that no chosen view covers yet (a next-best-view rule)."""
+    draws of that arm (the other at home) within the planning limits: each next view is the one that sees the most
+    ``cell``-sized cells [m] of ``workspace`` no chosen view has seen (seen: free up to the cell or its surface
+    seen; a next-best-view rule on unknown space). ``focus``: configurations the robot will take (a plan's goal);
+    the cells their bodies fill weigh ``focus_weight`` times as much (look where the arm is going)."""
     robot = perception.robot
     rng = np.random.default_rng(seed)
     limits = robot.planning_limits
-    out: list[tuple[str, np.ndarray]] = []
-    covered: set = set()
+    centres = _cell_centres(workspace, cell)
+    slack = np.full(len(centres), -cell / 2)
+    weight = np.ones(len(centres))
+    grid = perception.grid
+    for q in focus:
+        # the voxels of the workspace the robot's padded bodies will fill there, each to be seen past
+        starts, ends, radii = perception.robot_segments(robot.check_configuration(q, "focus"))
+        keys = grid.near_segments(starts, ends, radii + perception.padding)
+        points = grid.centers(np.unique(keys))
+        lo, hi = np.asarray(workspace[0]), np.asarray(workspace[1])
+        points = points[np.all((points >= lo) & (points <= hi), axis=1)]
+        points = points[rng.permutation(len(points))[:MAX_FOCUS_POINTS]]
+        centres = np.concatenate([centres, points])
+        slack = np.concatenate([slack, np.full(len(points), perception.free_margin)])
+        weight = np.concatenate([weight, np.full(len(points), focus_weight)])
     candidates = []
     for frame in perception.cameras:
         arm = "left" if "left" in frame else "right"
@@ -58,17 +95,22 @@ def scan_configurations(
             q = robot.home.copy()
             q[idx] = limits.lower[idx] + rng.uniform(0.05, 0.95, len(idx)) * (limits.upper[idx] - limits.lower[idx])
             T = perception.frame_pose(frame, q)
-            depth = render_depth(_PROBE, T, scene, max_range=perception.max_range)
-            candidates.append((frame, q, _seen_cells(depth, _PROBE, T, workspace, cell)))
+            starts, ends, radii = perception.robot_segments(q)  # the robot's own bodies hide what is behind them
+            bodies = zip(starts, ends, radii, strict=True)
+            depth = render_depth(_PROBE, T, scene, capsules=bodies, max_range=perception.max_range)
+            candidates.append((frame, q, _seen_cells(depth, _PROBE, T, centres, slack)))
+    out: list[tuple[str, np.ndarray]] = []
     chosen = {frame: 0 for frame in perception.cameras}
+    covered = np.zeros(len(centres), dtype=bool)
     while candidates:
-        k = max(range(len(candidates)), key=lambda i: len(candidates[i][2] - covered))
-        frame, q, cells = candidates.pop(k)
-        if not cells - covered:
+        gains = [float(weight[seen & ~covered].sum()) for _, _, seen in candidates]
+        k = int(np.argmax(gains))
+        frame, q, seen = candidates.pop(k)
+        if gains[k] <= 0:
             break
         if chosen[frame] < count:
             chosen[frame] += 1
-            covered |= cells
+            covered |= seen
             out.append((frame, q))
     return out
 
