@@ -159,16 +159,21 @@ def plan_scene(robot: Robot, limits: JointLimits, q_start: np.ndarray) -> PlanRe
 
 def plan_scene_seen(robot: Robot, limits: JointLimits, q_start: np.ndarray) -> PlanResult:
     from taplan.planning import plan_motion, verify_trajectory
-    from taplan.scene import CollisionWorld, load_scene
+    from taplan.scene import CollisionWorld, Perception, load_scene
     from taplan.scene.camera import PinholeCamera
-    from taplan.scene.scan import perceive
+    from taplan.scene.scan import perceive, scan_configurations
 
     truth = load_scene(SCENE_FILE)
     camera = PinholeCamera(160, 120, 84.25, 84.25, 80.0, 60.0)  # the wrist camera's field of view, quarter size
-    perception = perceive(robot, truth, camera=camera, resolution=0.01, thickness=0.03)
-    voxels = len(perception.scene.obstacles["perceived"].shape)
     goal = q_start.copy()
     goal[robot.group("right").indices] = SCENE_REACH_RIGHT
+    # scan views that look where the hand goes; what they do not see of the workspace blocks the plan
+    probe = Perception(robot, unknown="free", resolution=0.01)
+    views = scan_configurations(probe, truth, focus=[goal])
+    perception = perceive(robot, truth, views, camera=camera, resolution=0.01)
+    perception.mark_robot_free(q_start)  # the robot stands there: known free
+    perception.update_scene()
+    voxels = len(perception.scene.obstacles["perceived"].shape)
     target = {"right_tcp": robot.frame_pose(goal, "right_tcp")}
     # ~3,000 merged voxel boxes answer slower than two boxes: a wider wall-clock budget (about 1 s of CPU time)
     plan = plan_motion(robot, q_start, target, perception.scene, limits, max_time=30.0)
