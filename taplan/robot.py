@@ -22,6 +22,7 @@ from taplan._validation import as_matrix, as_vector
 from taplan.errors import ConfigError, InvalidInputError, UnknownNameError
 from taplan.io.native import native_stderr
 from taplan.limits import DEFAULT_PLANNING_SCALING, JointLimits
+from taplan.scene.camera_mounts import TELEAVATAR_CAMERA_FRAMES
 from taplan.scene.capsules import Capsule, capsules_from_urdf, read_srdf
 
 __all__ = [
@@ -40,6 +41,7 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 if not (MODELS_DIR / "teleavatar").is_dir():  # a checkout where the link was not kept (e.g. no symlink support)
     MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 TELEAVATAR_URDF = MODELS_DIR / "teleavatar" / "teleavatar.urdf"
+
 TELEAVATAR_ARM_CONFIG = MODELS_DIR / "teleavatar" / "arm_config.yml"
 TELEAVATAR_SYSTEM_CONFIG = MODELS_DIR / "teleavatar" / "system_config.yaml"
 
@@ -186,9 +188,8 @@ class Robot:
         robot = cls(urdf_path, limits=limits, groups=groups, home=home)
         # the wrist depth cameras' frames now, before any pinocchio Data is made from the model (adding a frame later
         # leaves earlier Data too small: a CollisionWorld's or an IK's would write past its end)
-        from taplan.scene.camera import add_camera_frames
-
-        add_camera_frames(robot)
+        for name, (parent, T) in TELEAVATAR_CAMERA_FRAMES.items():
+            robot.add_frame(name, parent, T)
         return robot
 
     # ------------------------------------------------------------------------------------------------- properties

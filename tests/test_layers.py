@@ -24,6 +24,7 @@ LAYERS = (
         "io",
         "models",
         "scene.capsules",
+        "scene.camera_mounts",
         "ik._native",
         "ik._kernel_math",
     ),

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from taplan.errors import InvalidInputError
+from taplan.scene.camera_mounts import TELEAVATAR_CAMERA_FRAMES
 from taplan.scene.scene import as_pose
 
 __all__ = [
@@ -212,32 +213,13 @@ class CameraMount:
         }
 
 
-def _optical(z_axis: np.ndarray, down: np.ndarray, tilt: float) -> np.ndarray:
-    """Rotation of an optical frame looking along ``z_axis`` with image-down ``down``, tilted by ``tilt`` [rad]
-    toward ``down``."""
-    z = z_axis * math.cos(tilt) + down * math.sin(tilt)
-    y = down * math.cos(tilt) - z_axis * math.sin(tilt)
-    return np.column_stack([np.cross(y, z), y, z])
-
-
-def _mount(
-    name: str, parent: str, xyz: list[float], z_axis: list[float], down: list[float], tilt: float
-) -> CameraMount:
-    T = np.eye(4)
-    T[:3, :3] = _optical(np.array(z_axis, dtype=float), np.array(down, dtype=float), tilt)
-    T[:3, 3] = xyz
-    source = (
-        "estimate: on the wrist housing 6 cm above the gripper axis, 5 cm along the tool axis, looking along the "
-        "tool axis tilted 20 deg toward the fingers (guide: a depth camera per wrist; no mounting published)"
-    )
-    return CameraMount(name, parent, T, source)
-
-
-# The tool axis is +y of Link-L7 and -y of Link-R7 (the fingers Link-L10/L11 sit at y = +0.177 m, Link-R10/R11
-# at -0.177 m in the vendor URDF); the fingers are on the -z side (z = -0.023 .. -0.039 m).
+_MOUNT_SOURCE = (
+    "estimate: on the wrist housing 6 cm above the gripper axis, 5 cm along the tool axis, looking along the tool axis "
+    "tilted 20 deg toward the fingers (guide: a depth camera per wrist; no mounting published)"
+)
+# the numbers: taplan.scene.camera_mounts (the TeleAvatar's model has these frames from the start)
 TELEAVATAR_CAMERAS: dict[str, CameraMount] = {
-    "left_depth_camera": _mount("left_depth_camera", "Link-L7", [0.0, 0.05, 0.06], [0, 1, 0], [0, 0, -1], 0.35),
-    "right_depth_camera": _mount("right_depth_camera", "Link-R7", [0.0, -0.05, 0.06], [0, -1, 0], [0, 0, -1], 0.35),
+    name: CameraMount(name, parent, T, _MOUNT_SOURCE) for name, (parent, T) in TELEAVATAR_CAMERA_FRAMES.items()
 }
 TELEAVATAR_DEPTH_TOPICS = {
     "left_depth_camera": ("/left/depth/image_raw", "/left/depth/camera_info"),
