@@ -391,6 +391,7 @@ class OccupancyGrid:
         self._strides = np.array([self.shape[1] * self.shape[2], self.shape[2], 1], dtype=np.int64)
         self.dropped_outside = 0
         self.version = 0
+        self.excluded_pixels: np.ndarray | None = None  # of the last insert_image
         self.free = np.zeros(cells, dtype=bool)  # known free (seen through, or the robot stood there)
         self.viewed = np.zeros(cells, dtype=bool)  # inside an image's view (within its range) at least once
         self.shadowed = np.zeros(cells, dtype=bool)  # an image saw a surface in front of it
@@ -500,7 +501,8 @@ class OccupancyGrid:
         ``depth * (ray_x[col], ray_y[row], 1)`` of the camera at ``T_root_camera``. Separable rays make each root
         coordinate one multiply-add over the image, without forming the (N, 3) points. With ``thickness`` [m] the
         points up to that depth behind each hit are occupied too (every half voxel): surfaces are taken as solids
-        at least that thick. Returns (measured, kept) pixels."""
+        at least that thick. Returns (measured, kept) pixels; ``self.excluded_pixels`` is then the mask of the
+        pixels whose hit fell in ``exclude`` (the robot's own)."""
         R, t = T_root_camera[:3, :3], T_root_camera[:3, 3]
         inv = 1.0 / self.resolution
         valid = np.isfinite(depth)
@@ -538,12 +540,15 @@ class OccupancyGrid:
             keys = key[inside].astype(np.int64)
             if not layer:
                 kept_pixels = len(keys)
+                first_keys, first_inside = keys, inside
             found.append(keys)
         keys = np.concatenate(found) if steps else found[0]
         self.dropped_outside += measured - kept_pixels
+        self.excluded_pixels = np.zeros(depth.shape, dtype=bool)
         if exclude is not None and len(exclude):
             self._scratch[exclude] = True
             keys = keys[~self._scratch[keys]]
+            self.excluded_pixels[first_inside] = self._scratch[first_keys]
             self._scratch[exclude] = False
         self.occupied[keys] = True
         self.free[keys] = False

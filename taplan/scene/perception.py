@@ -202,19 +202,6 @@ class Perception:
         moving = self.grid.near_segments(starts[~fixed], ends[~fixed], radii[~fixed] + self.padding)
         return np.concatenate([self._fixed_keys, moving])
 
-    def _own_pixels(self, depth: np.ndarray, camera: PinholeCamera, T: np.ndarray, own: np.ndarray) -> np.ndarray:
-        """Mask of the pixels whose measured point lies in the robot's own (padded) space ``own`` (voxel keys)."""
-        valid = np.isfinite(depth)
-        points = camera.points(depth) @ T[:3, :3].T + T[:3, 3]
-        keys, inside = self.grid.keys(points)
-        mine = np.zeros(self.grid.occupied.shape, dtype=bool)
-        mine[own] = True
-        hit = np.zeros(len(points), dtype=bool)
-        hit[np.flatnonzero(inside)] = mine[keys]
-        mask = np.zeros(depth.shape, dtype=bool)
-        mask[valid] = hit
-        return mask
-
     def mark_robot_free(self, q: npt.ArrayLike) -> int:
         """Mark known free the space of the robot's bodies (plus ``padding``) at ``q``: the robot stands there, so
         nothing else does (the configuration a plan starts from). Returns how many voxels were unknown."""
@@ -284,7 +271,7 @@ class Perception:
         if self.unknown != "free":
             # "occluded": what the robot's own bodies hide counts as viewed, not as hidden (the wrist camera's own
             # gripper fills a quarter of every image); "occupied" counts only what was seen past
-            ignore = self._own_pixels(depth, camera, T, own) if self.unknown == "occluded" else None
+            ignore = self.grid.excluded_pixels if self.unknown == "occluded" else None
             self.grid.mark_seen_free(
                 depth, camera.intrinsics, T, self.free_margin, max_range=self.max_range, ignore=ignore
             )
