@@ -21,7 +21,7 @@ from taplan import api
 from taplan.errors import ConfigError, InvalidInputError, UnknownNameError
 from taplan.reference.replay import JointStateSamples
 from taplan.ros.msg_definitions import FSM_STATE_TOPIC, MESSAGE_DEFINITIONS
-from taplan.ros.sensor_fields import SENSOR_TYPES
+from taplan.ros.sensor_fields import SENSOR_TYPES, sensor_body
 
 __all__ = ["BagWriter", "OFFERED_QOS", "RecordedRun", "bag_files", "read_messages", "read_recording", "read_run"]
 
@@ -45,9 +45,6 @@ def _ros_dict(msg_type: str, fields: dict[str, Any], stamp_ns: int) -> dict[str,
     return dict(fields)
 
 
-_ROI = ("x_offset", "y_offset", "height", "width", "do_rectify")
-
-
 def _sensor_ros_dict(msg_type: str, fields: dict[str, Any], stamp_ns: int) -> dict[str, Any]:
     """The ROS dict of an Image, CameraInfo or PointCloud2 given as taplan's plain fields (header from ``stamp``
     [s], else the log time, and ``frame_id``)."""
@@ -59,45 +56,8 @@ def _sensor_ros_dict(msg_type: str, fields: dict[str, Any], stamp_ns: int) -> di
             "stamp": {"sec": int(sec), "nanosec": min(int(round((seconds - sec) * 1e9)), 999_999_999)},
             "frame_id": str(fields.get("frame_id", "")),
         },
-        "height": int(fields.get("height", 0)),
-        "width": int(fields.get("width", 0)),
+        **sensor_body(msg_type, fields),
     }
-    if msg_type.endswith("/Image"):
-        out.update(
-            encoding=str(fields.get("encoding", "")),
-            is_bigendian=int(bool(fields.get("is_bigendian", 0))),
-            step=int(fields.get("step", 0)),
-            data=bytes(fields.get("data", b"")),
-        )
-    elif msg_type.endswith("/CameraInfo"):
-        roi = fields.get("roi") or {}
-        out.update(
-            distortion_model=str(fields.get("distortion_model", "")),
-            d=[float(v) for v in fields.get("d", [])],
-            k=[float(v) for v in fields.get("k", [0.0] * 9)],
-            r=[float(v) for v in fields.get("r", [0.0] * 9)],
-            p=[float(v) for v in fields.get("p", [0.0] * 12)],
-            binning_x=int(fields.get("binning_x", 0)),
-            binning_y=int(fields.get("binning_y", 0)),
-            roi={k: roi.get(k, False if k == "do_rectify" else 0) for k in _ROI},
-        )
-    else:
-        out.update(
-            fields=[
-                {
-                    "name": str(f["name"]),
-                    "offset": int(f["offset"]),
-                    "datatype": int(f["datatype"]),
-                    "count": int(f.get("count", 1)),
-                }
-                for f in fields.get("fields", [])
-            ],
-            is_bigendian=bool(fields.get("is_bigendian", False)),
-            point_step=int(fields.get("point_step", 0)),
-            row_step=int(fields.get("row_step", 0)),
-            data=bytes(fields.get("data", b"")),
-            is_dense=bool(fields.get("is_dense", False)),
-        )
     return out
 
 

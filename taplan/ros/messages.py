@@ -25,7 +25,7 @@ from cyclonedds.idl.types import array, float32, float64, int32, sequence, uint8
 
 from taplan.errors import ConfigError
 from taplan.ros.msg_definitions import INT32, MESSAGE_DEFINITIONS
-from taplan.ros.sensor_fields import CAMERA_INFO, IMAGE, POINT_CLOUD2, SENSOR_TYPES, sensor_fields
+from taplan.ros.sensor_fields import CAMERA_INFO, IMAGE, POINT_CLOUD2, SENSOR_TYPES, sensor_body, sensor_fields
 
 __all__ = [
     "Time",
@@ -248,45 +248,12 @@ def to_idl(msg_type: str, fields: dict[str, Any], stamp: float = 0.0) -> Any:
 
 def _sensor_to_idl(msg_type: str, fields: dict[str, Any], stamp: float) -> Any:
     header = Header(stamp=_stamp(stamp), frame_id=str(fields.get("frame_id", "")))
-    size = {"height": int(fields.get("height", 0)), "width": int(fields.get("width", 0))}
+    body = sensor_body(msg_type, fields)
     if msg_type == IMAGE:
-        return Image(
-            header=header,
-            encoding=str(fields.get("encoding", "")),
-            is_bigendian=int(bool(fields.get("is_bigendian", 0))),
-            step=int(fields.get("step", 0)),
-            data=bytes(fields.get("data", b"")),
-            **size,
-        )
+        return Image(header=header, **body)
     if msg_type == CAMERA_INFO:
-        roi = fields.get("roi") or {}
-        return CameraInfo(
-            header=header,
-            distortion_model=str(fields.get("distortion_model", "")),
-            d=[float(v) for v in fields.get("d", [])],
-            k=[float(v) for v in fields.get("k", [0.0] * 9)],
-            r=[float(v) for v in fields.get("r", [0.0] * 9)],
-            p=[float(v) for v in fields.get("p", [0.0] * 12)],
-            binning_x=int(fields.get("binning_x", 0)),
-            binning_y=int(fields.get("binning_y", 0)),
-            roi=RegionOfInterest(
-                **{k: roi[k] for k in ("x_offset", "y_offset", "height", "width", "do_rectify") if k in roi}
-            ),
-            **size,
-        )
-    return PointCloud2(
-        header=header,
-        fields=[
-            PointField(str(f["name"]), int(f["offset"]), int(f["datatype"]), int(f.get("count", 1)))
-            for f in fields.get("fields", [])
-        ],
-        is_bigendian=bool(fields.get("is_bigendian", False)),
-        point_step=int(fields.get("point_step", 0)),
-        row_step=int(fields.get("row_step", 0)),
-        data=bytes(fields.get("data", b"")),
-        is_dense=bool(fields.get("is_dense", False)),
-        **size,
-    )
+        return CameraInfo(header=header, **{**body, "roi": RegionOfInterest(**body["roi"])})
+    return PointCloud2(header=header, **{**body, "fields": [PointField(**f) for f in body["fields"]]})
 
 
 def from_idl(msg_type: str, sample: Any) -> dict[str, Any]:
