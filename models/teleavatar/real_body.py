@@ -7,28 +7,28 @@ from the vendor's teleavatar_urdf_20260928-v2, and ``model/assets/collision/*.ob
 of the vendor's collision meshes, listed in ``model/assets/collision/index.json``). Its vertices were read through
 a text index and transcribed into one file per MuJoCo body, ``<body>.txt`` with lines ``x y z`` in mm in that
 body's frame, pieces separated by ``# piece`` lines: ``RAW/`` (first session: rounded to 1 mm, representative
-subsets: every ring and every extreme of each piece) and ``RAW/full/`` (second session: 0.1 mm; every vertex of
-arm links 1, 3, 5, 6, of the finger, of the wrist camera, of the small pieces and of link 4's pieces 2, 4, 7; the
-other large pieces (~300-1,100 vertices) by their extremes and outer rings, a few tiny or boxy pieces by their
-bounding-box corners, a superset of the piece). Where a piece was later read in full, the representative subset
-had missed at most 0.7 mm (link 3) beyond the bodies fitted to it. The body placements used are in
-``BODY_CHAIN`` / ``GRIPPER`` / ``EYE`` / ``CARRIAGE`` below (numbers from robot.xml). The raw transcriptions are
-not in the repository (vendor-derived vertices); the npz records its source in its ``source`` entry.
+subsets: every ring and every extreme of each piece), ``RAW/full/`` (second session: 0.1 mm; every vertex of
+arm links 1, 3, 5, 6, of the finger, of the wrist camera and of link 4's pieces 4 and 7; the other pieces by their
+extremes and outer rings, a few tiny or boxy pieces by their bounding-box corners, a superset of the piece) and
+``RAW/full3/`` (every vertex line, to 0.001 mm, of each piece of links 2 and 4, of the gripper base's 32 pieces
+and of the torso hull: 17,336 vertices). Every stored piece of arm links 1-6, the gripper base and the torso is
+now read in full; the subsets fitted before had missed at most 0.7 mm (link 3) beyond the bodies. The body
+placements used are in ``BODY_CHAIN`` / ``GRIPPER`` / ``EYE`` / ``CARRIAGE`` below (numbers from robot.xml). The
+raw transcriptions are not in the repository (vendor-derived vertices); the npz records its source in its
+``source`` entry.
 
 What the reference set covers (and what it does not):
 
-* left arm links 1, 3, 5, 6 (single convex hulls, every vertex), link 2 (all 16 pieces; pieces 4, 7, 14 and 15
-  by the extremes and rings of their vertex pages), link 4 (all 16 pieces; pieces 2, 4, 7 every vertex, pieces 1, 9,
-  11-13 by the extremes and rings of their first page);
-* the gripper body (all 32 pieces), the fingers (``rg-link3``; the other finger is its mirror image: same mass and
-  hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers
+* left arm links 1, 3, 5, 6 (single convex hulls), link 2 (16 pieces) and link 4 (16 pieces): every vertex;
+* the gripper body (all 32 pieces, every vertex), the fingers (``rg-link3``; the other finger is its mirror image:
+  same mass and hull volume, centre of mass mirrored), the wrist camera (``rg-link8``), the finger linkage: carriers
   (``rg-link2``, the 8 of its 16 pieces the index stores; carrier b is its mirror image), drive links
   (``rg-link9``, ``rg-link10``), crank (``rg-link1``, pieces 0, 1, 3, 15 of 16, as bounding boxes), all placed by
   robot.xml's joint couplings over the opening; the parallel bars (link4/link7: no piece in the index) are
   estimated boxes (``BAR_HALF_WIDTH``);
-* the torso and head housing (``body_link``, one hull: torso front/back, shoulder flanges, neck and head), the head
-  camera (``eye_Link``) and the lift carriage behind the torso (``lift_carriage_link``, 16 pieces), both rigid with
-  the torso;
+* the torso and head housing (``body_link``, one hull, every vertex: torso front/back, shoulder flanges, neck and
+  head), the head camera (``eye_Link``) and the lift carriage behind the torso (``lift_carriage_link``, 16 pieces),
+  both rigid with the torso;
 * the lift column (``base_link`` pieces 0 and 1): it stands on the mobile base while the torso rides the lift, so
   its place relative to the torso depends on the lift height, which taplan does not model; the reference set holds
   it at both ends of the lift's travel (0 and 0.74 m) and its body covers every height between;
@@ -63,8 +63,9 @@ SOURCE = (
     "couplings) and model/assets/collision/*.obj @98399bd (CoACD convex pieces): armL1-6_link (armR1_link_0, "
     "armR2_link_5: mirror checks), lg-base_link_0-31, rg-link1_0,1,3,15, rg-link2 (8 of 16), rg-link3_0, rg-link8_0, "
     "rg-link9_0, rg-link10_0, body_link_0, eye_Link_0, lift_carriage_link_0-15, base_link_0-1 (the lift column); "
-    "vertices transcribed by hand "
-    "(0.1 mm; arm links 1, 3, 5, 6, finger, wrist camera: every vertex; first-session subsets at 1 mm), "
+    "vertices transcribed from the stored text (every vertex, 0.001 mm, of every piece of arm links 1-6, the "
+    "gripper base, the torso, the finger and the wrist camera; the crank, carrier and column pieces by their "
+    "bounding boxes or extremes; first-session subsets at 1 mm kept, they add nothing to the hulls), "
     "placed in taplan's link frames by models/teleavatar/real_body.py (see its docstring for what is "
     "complete and what is representative or estimated). Points in metres; sets 'Link-XN[/part[@opening]]' and "
     "'root/part'."
@@ -153,8 +154,8 @@ def _load(raw: Path, name: str, surface: bool = True) -> np.ndarray:
     """The transcribed vertices of ``name`` [m] and, with ``surface``, points sampled on each convex piece's
     hull (pieces are separated by ``# piece`` lines; a file without them is one hull), about one per
     ``SURFACE_SPACING`` squared: the real body is the pieces' hulls, not only their vertices. Both transcriptions
-    are read: ``RAW/<name>.txt`` (first session) and ``RAW/full/<name>.txt`` (the pieces added later)."""
-    files = [f for f in (raw / f"{name}.txt", raw / "full" / f"{name}.txt") if f.exists()]
+    are read: ``RAW/<name>.txt`` (first session) and ``RAW/full*/<name>.txt`` (the pieces read in full later)."""
+    files = [f for f in (raw / f"{name}.txt", *sorted(raw.glob(f"full*/{name}.txt"))) if f.exists()]
     if not files:
         raise FileNotFoundError(f"no transcription of {name} in {raw} or {raw / 'full'}")
     pieces: list[list[list[str]]] = [[]]
