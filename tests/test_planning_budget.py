@@ -224,3 +224,39 @@ def test_the_optimisers_qp_stops_at_the_deadline(robot: taplan.Robot, monkeypatc
     result = optimize.optimize_path(world, path, active, limits.lower, limits.upper, 0.01, deadline=begin + 1.0)
     assert result is None and len(given) == 1 and 0 < given[0] <= 1.0  # [s]: the time left, and no second QP
     assert time.perf_counter() - begin < 1.0 + 0.3
+
+
+def test_large_qps_go_to_the_sparse_solver_and_agree_with_the_dense_one(
+    robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``solver="auto"``: daqp up to ``LARGE_QP`` variables, osqp above (its sparse ADMM is several times faster on the
+    smoother's two-arm QPs); with every QP forced past the threshold the optimised path keeps the margin and is as
+    short as daqp's within 2 % (osqp stops at 1e-6 residuals, daqp solves exactly)."""
+    import qpsolvers
+
+    from taplan.planning import optimize
+
+    world, start, goal = _hard_problem(robot)
+    active = np.array(robot.group("right").indices)
+    limits = robot.planning_limits
+    real = qpsolvers.solve_qp
+    used: list[tuple[str, int]] = []
+
+    def recording(P, q, *args, solver: str, **options):  # noqa: ANN001, ANN002, ANN003, ANN202
+        used.append((solver, len(q)))
+        return real(P, q, *args, solver=solver, **options)
+
+    monkeypatch.setattr(optimize.qpsolvers, "solve_qp", recording)
+    path = np.array([start, goal])
+    dense = optimize.optimize_path(world, path, active, limits.lower, limits.upper, 0.01)
+    assert dense is not None and used and all(s == "daqp" and n <= optimize.LARGE_QP for s, n in used)
+    used.clear()
+    monkeypatch.setattr(optimize, "LARGE_QP", 0)
+    sparse = optimize.optimize_path(world, path, active, limits.lower, limits.upper, 0.01)
+    assert sparse is not None and used and all(s == "osqp" for s, _ in used)
+    assert sparse.clearance >= 0.01  # [m]
+
+    def length(p: np.ndarray) -> float:
+        return float(np.linalg.norm(np.diff(p[:, active], axis=0), axis=1).sum())  # [rad]
+
+    assert length(sparse.path) <= 1.02 * length(dense.path)
