@@ -517,3 +517,19 @@ def test_plan_without_a_scene_checks_the_robots_own_bodies(robot, tmp_path: Path
     assert "FAIL: torso / right_gripper_0 in collision" in done.stdout
     checked = subprocess.run([sys.executable, "-m", "taplan", "check", str(out), "--no-png"], capture_output=True)
     assert checked.returncode == 1
+
+
+def test_a_plan_that_does_not_start_at_the_robot_is_refused_before_anything_is_sent(robot, start_sim) -> None:
+    sim = start_sim()
+    listener = CommandListener(sim.domain)
+    interface = DdsInterface(sim.domain, config=loopback_config())
+    runner = Runner(interface, robot)
+    start = runner.wait_for_state()
+    away = start.copy()
+    away[2] += 0.3  # [rad] l_joint3, beyond the 0.05 rad start tolerance
+    plan = jerk_limited(np.array([away, start]), robot.planning_limits, method="path").trajectory
+    with pytest.raises(RunError, match=r"the plan starts 0\.3\d* rad from the measured l_joint3 .*current state"):
+        runner.execute(plan)
+    interface.close()
+    sent = listener.close()
+    assert len(sent["left"]) == 0 and len(sent["right"]) == 0

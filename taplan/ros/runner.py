@@ -456,19 +456,23 @@ class Runner:
             raise CheckFailedError(presend.failures[0], presend.table())
         index = self.robot.indices(trajectory.joint_names)
         times, commands = self._command_grid(trajectory, start_q)
-        offset = np.abs(commands[0] - start_q)
-        if offset.max() > self.config.start_tolerance:
-            j = int(np.argmax(offset))
-            raise RunError(
-                f"the plan starts {offset[j]:.4f} rad from the measured {self.robot.joint_names[j]} "
-                f"(tolerance {self.config.start_tolerance:g} rad): plan from the robot's current state"
-            )
+        self._require_start_at(commands[0], start_q, "the plan", "plan from the robot's current state")
         self.arm(start_q)
         velocity = np.zeros_like(commands)
         acceleration = np.zeros_like(commands)
         velocity[:, index] = trajectory(times + trajectory.times[0], 1)
         acceleration[:, index] = trajectory(times + trajectory.times[0], 2)
         return self._drive(lambda k: (commands[k], velocity[k], acceleration[k]) if k < len(times) else None)
+
+    def _require_start_at(self, first: np.ndarray, measured: np.ndarray, what: str, remedy: str) -> None:
+        """RunError unless ``first`` (nq,) [rad] is within ``start_tolerance`` of the ``measured`` positions."""
+        offset = np.abs(first - measured)
+        if offset.max() > self.config.start_tolerance:
+            j = int(np.argmax(offset))
+            raise RunError(
+                f"{what} starts {offset[j]:.4f} rad from the measured {self.robot.joint_names[j]} "
+                f"(tolerance {self.config.start_tolerance:g} rad): {remedy}"
+            )
 
     def _command_grid(self, trajectory: Trajectory, hold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The command times [s] from the start and the commands (k, nq) the runner sends for ``trajectory``."""
@@ -591,13 +595,7 @@ class Runner:
             raise InvalidInputError("duration", duration, "a positive time [s]")
         start_q = self.wait_for_state()
         first = np.asarray(replanner.state(0.0)[0], dtype=float)
-        offset = np.abs(first - start_q)
-        if offset.max() > self.config.start_tolerance:
-            j = int(np.argmax(offset))
-            raise RunError(
-                f"the replanner starts {offset[j]:.4f} rad from the measured {self.robot.joint_names[j]} "
-                f"(tolerance {self.config.start_tolerance:g} rad): build it at the robot's current state"
-            )
+        self._require_start_at(first, start_q, "the replanner", "build it at the robot's current state")
         self.arm(start_q)
         stop = threading.Event()
         begin: list[float] = []  # the clock at the first command: the replanner's time 0
