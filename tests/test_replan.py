@@ -6,19 +6,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sim_helpers import BALL, TICK, ball_distance, ready_sim, with_ball
 
 import taplan
 from taplan import api
 from taplan.errors import InvalidInputError
 from taplan.planning import Replanner
-from taplan.ros.interface import FakeRosInterface
-from taplan.ros.sim import FsmState, SimConfig, SimulatedRobot
 from taplan.scene import Box, CollisionWorld, HalfSpace, Scene, Sphere
 
-TICK = 0.01  # [s] the control loop and the sim's motion period (100 Hz)
 MARGIN = 0.01  # [m] the planner's margin: the trajectory is certified at a quarter
 GOAL_TOL = 1e-6  # [rad]
-BALL = 0.05  # [m] radius of the obstacle that moves into the path
 LIMIT_TOL = 1e-6  # relative slack of the limit checks on sampled derivatives
 
 
@@ -41,33 +38,6 @@ def _problem(robot: taplan.Robot) -> tuple[Scene, np.ndarray, np.ndarray]:
     return scene, start, goal
 
 
-def _with_ball(scene: Scene, centre: np.ndarray) -> Scene:
-    copy = Scene()
-    for o in scene.obstacles.values():
-        copy.add(o.name, o.shape, o.pose)
-    copy.add("ball", Sphere(BALL), (centre.tolist(), [0, 0, 0, 1]))
-    return copy
-
-
-def _ball_distance(world: CollisionWorld, q: np.ndarray) -> float:
-    d = world.distances(q, jacobian=False)
-    return min(float(x) for x, pair in zip(d.distance, d.pairs, strict=True) if "ball" in pair)
-
-
-def _ready(robot: taplan.Robot) -> tuple[FakeRosInterface, SimulatedRobot]:
-    fake = FakeRosInterface()
-    sim = SimulatedRobot(fake, robot, SimConfig(motion="joint"))
-    for _ in range(40):  # heartbeat and hold commands until READY
-        fake.deliver(api.Topics.ENABLE, {"data": 1.0})
-        for side in api.SIDES:
-            fake.deliver(api.Topics.joint_cmd(side), {"name": [], "position": sim.q[sim.indices[side]].tolist()})
-        for _ in range(5):
-            sim.step()
-            fake.advance(TICK)
-    assert sim.fsm == FsmState.READY
-    return fake, sim
-
-
 def test_an_unchanged_plan_is_kept_and_a_clear_change_does_not_replan(robot) -> None:
     scene, start, goal = _problem(robot)
     replanner = Replanner(robot, scene, start, 0.0)
@@ -85,7 +55,7 @@ def test_an_unchanged_plan_is_kept_and_a_clear_change_does_not_replan(robot) -> 
 
 def test_replans_around_an_obstacle_moving_into_the_path_in_the_simulator(robot) -> None:
     scene, start, goal = _problem(robot)
-    fake, sim = _ready(robot)
+    fake, sim = ready_sim(robot)
     np.testing.assert_allclose(sim.q, start, atol=1e-9)
     t = fake.now()
     replanner = Replanner(robot, scene, start, t, max_time=2.0)
@@ -99,8 +69,8 @@ def test_replans_around_an_obstacle_moving_into_the_path_in_the_simulator(robot)
     before = [first(s * first.duration) for s in np.linspace(0.0, 0.35, 8)]
     for fraction in np.linspace(0.5, 0.95, 10):
         ball = robot.frame_pose(first(fraction * first.duration), "right_tcp")[:3, 3]
-        trial = CollisionWorld(robot, _with_ball(scene, ball))
-        if _ball_distance(trial, goal) > 0.03 and min(_ball_distance(trial, q) for q in before) > 0.02:
+        trial = CollisionWorld(robot, with_ball(scene, ball))
+        if ball_distance(trial, goal) > 0.03 and min(ball_distance(trial, q) for q in before) > 0.02:
             break
     else:
         pytest.fail("no place on the path for the ball")
@@ -140,10 +110,10 @@ def test_replans_around_an_obstacle_moving_into_the_path_in_the_simulator(robot)
     assert np.all(np.abs(np.diff(a_all, axis=0)) <= limits.jerk * TICK * (1 + 1e-3) + 1e-9)
     # after the ball arrived, every commanded configuration keeps the certified quarter margin from it
     after = np.array(times) >= arrival
-    clearance = min(_ball_distance(world, q) for q in q_all[after])
+    clearance = min(ball_distance(world, q) for q in q_all[after])
     assert clearance >= MARGIN / 4 - 1e-9
     # without re-planning, the first plan would have hit the ball
-    assert min(_ball_distance(world, first(s)) for s in np.linspace(0, first.duration, 200)) < 0.0
+    assert min(ball_distance(world, first(s)) for s in np.linspace(0, first.duration, 200)) < 0.0
 
 
 def test_a_plan_ready_after_its_hand_over_was_read_is_not_used(robot) -> None:
@@ -162,8 +132,8 @@ def test_a_plan_ready_after_its_hand_over_was_read_is_not_used(robot) -> None:
     passed = [first(s * first.duration) for s in np.linspace(0.0, 0.4, 8)]
     for fraction in np.linspace(0.6, 0.95, 8):
         ball = robot.frame_pose(first(fraction * first.duration), "right_tcp")[:3, 3]
-        trial = CollisionWorld(robot, _with_ball(scene, ball))
-        if _ball_distance(trial, goal) > 0.03 and min(_ball_distance(trial, q) for q in passed) > 0.02:
+        trial = CollisionWorld(robot, with_ball(scene, ball))
+        if ball_distance(trial, goal) > 0.03 and min(ball_distance(trial, q) for q in passed) > 0.02:
             break
     else:
         pytest.fail("no place on the path for the ball")
@@ -183,4 +153,4 @@ def test_a_plan_ready_after_its_hand_over_was_read_is_not_used(robot) -> None:
     assert np.all(np.abs(np.diff(a, axis=0)) <= limits.jerk * 0.01 * (1 + 1e-3) + 1e-9)
     np.testing.assert_allclose(states[-1][0], goal, atol=GOAL_TOL)
     world = CollisionWorld(robot, scene, engine=False)
-    assert min(_ball_distance(world, s[0]) for s in states[::5]) >= MARGIN / 4 - 1e-6
+    assert min(ball_distance(world, s[0]) for s in states[::5]) >= MARGIN / 4 - 1e-6

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sim_helpers import BALL, ball_distance, with_ball
 
 import taplan
 from taplan.planning import Replanner
@@ -32,7 +33,6 @@ MARGIN = 0.01  # [m] the planner's margin: every trajectory is certified at a qu
 MAX_TIME = 1.0  # [s] each plan's budget
 LATENCY = MAX_TIME + 0.4  # [s] hand-over after an update: the budget, its 0.2 s tolerance and room for load
 SLOW = 0.02  # share of the planning velocity limits: a motion long enough for an obstacle to arrive during it
-BALL = 0.05  # [m]
 GOAL_TOL = 0.01  # [rad] the runner's goal tolerance
 
 
@@ -69,19 +69,6 @@ def _scene() -> Scene:
     return scene
 
 
-def _ball_distance(world: CollisionWorld, q: np.ndarray) -> float:
-    d = world.distances(q, jacobian=False)
-    return min(float(x) for x, pair in zip(d.distance, d.pairs, strict=True) if "ball" in pair)
-
-
-def _with_ball(scene: Scene, centre: np.ndarray) -> Scene:
-    copy = Scene()
-    for o in scene.obstacles.values():
-        copy.add(o.name, o.shape, o.pose)
-    copy.add("ball", Sphere(BALL), (centre.tolist(), [0, 0, 0, 1]))
-    return copy
-
-
 def test_replans_over_dds_around_a_ball_moving_into_the_path(robot, sim_domain) -> None:
     interface = DdsInterface(sim_domain, config=loopback_config())
     # the sim is a second process on a loaded 2-core machine: its joint states can pause for 0.2 s (the runner's
@@ -109,13 +96,13 @@ def test_replans_over_dds_around_a_ball_moving_into_the_path(robot, sim_domain) 
     reachable = [first(t) for t in np.linspace(0.0, min(arrival + LATENCY + 1.5, first.duration), 30)]
     for fraction in np.linspace(0.6, 0.95, 36):
         ball = robot.frame_pose(first(fraction * first.duration), "right_tcp")[:3, 3]
-        trial = CollisionWorld(robot, _with_ball(scene, ball), engine=False)
-        if _ball_distance(trial, goal) > 0.025 and min(_ball_distance(trial, q) for q in reachable) > 0.02:
+        trial = CollisionWorld(robot, with_ball(scene, ball), engine=False)
+        if ball_distance(trial, goal) > 0.025 and min(ball_distance(trial, q) for q in reachable) > 0.02:
             break
     else:
         pytest.fail("no place on the path for the ball")
-    moved = CollisionWorld(robot, _with_ball(scene, ball), engine=False)
-    assert min(_ball_distance(moved, first(t)) for t in np.linspace(0, first.duration, 200)) < 0.0  # it would hit
+    moved = CollisionWorld(robot, with_ball(scene, ball), engine=False)
+    assert min(ball_distance(moved, first(t)) for t in np.linspace(0, first.duration, 200)) < 0.0  # it would hit
 
     pushed: list[float] = []
 
@@ -150,7 +137,7 @@ def test_replans_over_dds_around_a_ball_moving_into_the_path(robot, sim_domain) 
     assert np.all(sent >= robot.limits.lower - 1e-9) and np.all(sent <= robot.limits.upper + 1e-9)
 
     # independently of the planner: every command clear of the ball where it is now (coal, per command)
-    clearance = min(_ball_distance(moved, q) for q in sent)
+    clearance = min(ball_distance(moved, q) for q in sent)
     assert clearance >= MARGIN / 4 - 1e-6, clearance
     final = result.measured[-1]
     np.testing.assert_allclose(final, goal, atol=GOAL_TOL)

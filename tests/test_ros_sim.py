@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sim_helpers import TICK, ready_sim
 
 import taplan
 from taplan import api
 from taplan.errors import InvalidInputError
 from taplan.ros.interface import FakeRosInterface
-from taplan.ros.sim import FsmState, SimConfig, SimulatedRobot
+from taplan.ros.sim import SimConfig, SimulatedRobot
 
-TICK = 0.01  # [s] the sim's motion period (100 Hz)
 COMMAND = 0.02  # [s] the stream's period (50 Hz)
 SPEED = 1.0  # [rad/s] of the streamed ramp on l_joint1
 
@@ -21,20 +21,6 @@ SPEED = 1.0  # [rad/s] of the streamed ramp on l_joint1
 @pytest.fixture(scope="module")
 def robot() -> taplan.Robot:
     return taplan.Robot.teleavatar()
-
-
-def _ready(robot: taplan.Robot, motion: str) -> tuple[FakeRosInterface, SimulatedRobot]:
-    fake = FakeRosInterface()
-    sim = SimulatedRobot(fake, robot, SimConfig(motion=motion))
-    for _ in range(40):  # heartbeat and hold commands until READY
-        fake.deliver(api.Topics.ENABLE, {"data": 1.0})
-        for side in api.SIDES:
-            fake.deliver(api.Topics.joint_cmd(side), {"name": [], "position": sim.q[sim.indices[side]].tolist()})
-        for _ in range(5):
-            sim.step()
-            fake.advance(TICK)
-    assert sim.fsm == FsmState.READY
-    return fake, sim
 
 
 def _stream(fake: FakeRosInterface, sim: SimulatedRobot, commands: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,7 +43,7 @@ def _stream(fake: FakeRosInterface, sim: SimulatedRobot, commands: int) -> tuple
 
 
 def test_interpolating_model_moves_at_the_streamed_speed(robot) -> None:
-    fake, sim = _ready(robot, "interpolate")
+    fake, sim = ready_sim(robot, "interpolate")
     _, q, v = _stream(fake, sim, 30)
     steady = v[4:]  # after the first segment (its duration is clamped by the pause before it)
     np.testing.assert_allclose(steady, SPEED, atol=1e-6)  # [rad/s]: no staircase
@@ -65,7 +51,7 @@ def test_interpolating_model_moves_at_the_streamed_speed(robot) -> None:
 
 
 def test_joint_mode_turns_a_slower_stream_into_a_staircase(robot) -> None:
-    fake, sim = _ready(robot, "joint")
+    fake, sim = ready_sim(robot, "joint")
     _, q, v = _stream(fake, sim, 30)
     # each 50 Hz command is reached in the first 10 ms tick, then the arm waits: 2 rad/s, 0, 2 rad/s, ...
     np.testing.assert_allclose(v[4::2], 2 * SPEED, atol=1e-6)
