@@ -260,3 +260,14 @@ def test_large_qps_go_to_the_sparse_solver_and_agree_with_the_dense_one(
         return float(np.linalg.norm(np.diff(p[:, active], axis=0), axis=1).sum())  # [rad]
 
     assert length(sparse.path) <= 1.02 * length(dense.path)
+
+
+def test_an_unknown_qp_solver_is_refused_naming_the_valid_ones(robot: taplan.Robot) -> None:
+    from taplan.planning import optimize_path
+
+    world, start, goal = _hard_problem(robot)
+    limits = robot.planning_limits
+    active = np.array(robot.group("right").indices)
+    valid = "solver: expected 'auto' or an installed qpsolvers backend .*received 'simplex'"
+    with pytest.raises(InvalidInputError, match=valid):
+        optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, 0.01, solver="simplex")

@@ -27,6 +27,7 @@ import numpy as np
 import qpsolvers
 import scipy.sparse as sp
 
+from taplan.errors import InvalidInputError
 from taplan.planning.verify import check_segments
 from taplan.scene.world import CollisionWorld
 
@@ -142,6 +143,9 @@ def optimize_path(
             QPs (6.5 ms against proxqp's 12 ms sparse and 24 ms dense, same solution to 1e-6), and osqp's sparse
             ADMM above ``LARGE_QP`` variables.
     """
+    if solver != "auto" and solver not in qpsolvers.available_solvers:
+        valid = f"'auto' or an installed qpsolvers backend {qpsolvers.available_solvers}"
+        raise InvalidInputError("solver", solver, valid)
     path = np.asarray(path, dtype=float)
     full = path[0].copy()
     seed = path[:, active]
