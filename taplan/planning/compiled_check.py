@@ -5,9 +5,10 @@ The world's bodies (robot capsules, obstacles, attached objects) and its active 
 ``GeometryModel`` whose collision requests carry coal's ``security_margin = clearance``: ``computeCollisions`` then
 answers "some pair is closer than ``clearance``" after forward kinematics, stopping at the first such pair, in about
 0.01 ms where a full distance evaluation in Python takes milliseconds. The sampler explores with it; it certifies
-nothing. A scene with perceived occupancy (voxels that answer their own distances) is tested through the world's
-distances instead. Every path it finds is certified afterwards by conservative advancement
-(:func:`~taplan.planning.verify.check_segment`), which stays the planner's only guarantee.
+nothing. Perceived occupancy (voxels that answer their own distances) is tested beside it by
+:class:`~taplan.planning.field_check.FieldClearance` (bounds from the voxels' surface, exact where they are close).
+Every path it finds is certified afterwards by conservative advancement (:func:`~taplan.planning.verify.
+check_segment`), which stays the planner's only guarantee.
 
 Given the joints that move (``active``), the pairs whose two members both stay put (an obstacle, the torso, the held
 arm) are left out: their distance is that of the start, which the planner checked before sampling; a one-arm search
@@ -72,8 +73,13 @@ class ClearanceCheck:
         self.reach = world.reach.copy()
         self.checks = 0  # configurations tested (a measure of the sampler's work)
         self.geometry: Any = None
+        self.fields: Any = None
         if any(hasattr(o.shape, "capsule_distances") for o in world.scene.obstacles.values()):
-            return  # perceived occupancy answers its own distances: the world's (slower) test is used
+            from taplan.planning.field_check import FieldClearance
+
+            self.fields = FieldClearance(world, self.clearance, active)
+            if not self.fields.ready:
+                return  # no distance engine for the bodies' segments: the world's (slower) test is used
         self.geometry = pin.GeometryModel()
         ids: dict[str, int] = {}
         for body in world.bodies:
@@ -84,6 +90,8 @@ class ClearanceCheck:
                 pin.GeometryObject(body.name, body.joint, placement, shape)
             )
         for obstacle in world.scene.obstacles.values():
+            if hasattr(obstacle.shape, "capsule_distances"):
+                continue  # tested by self.fields
             placement = pin.SE3(obstacle.pose[:3, :3], obstacle.pose[:3, 3])
             ids[obstacle.name] = self.geometry.addGeometryObject(
                 pin.GeometryObject(obstacle.name, 0, placement, obstacle.shape.to_coal())
@@ -94,7 +102,7 @@ class ClearanceCheck:
             ids[attached.name] = self.geometry.addGeometryObject(
                 pin.GeometryObject(attached.name, frame.parentJoint, placement, attached.shape.to_coal())
             )
-        self.pairs = world.distances(robot.home, jacobian=False).pairs
+        self.pairs = [(a, b) for a, b in world.distances(robot.home, jacobian=False).pairs if a in ids and b in ids]
         if active is not None:
             joints = {
                 self.geometry.geometryObjects[i].name: self.geometry.geometryObjects[i].parentJoint
@@ -113,7 +121,9 @@ class ClearanceCheck:
         self.checks += 1
         if self.geometry is None:
             return not self.world.in_collision(q, margin=self.clearance)
-        return not pin.computeCollisions(self.model, self.data, self.geometry, self.geometry_data, q, True)
+        if pin.computeCollisions(self.model, self.data, self.geometry, self.geometry_data, q, True):
+            return False
+        return self.fields is None or self.fields(q)
 
     def motion(self, q_a: np.ndarray, q_b: np.ndarray, spacing: float) -> bool:
         """True when every state tested along the straight segment keeps ``clearance``: ``q_b`` first, then states

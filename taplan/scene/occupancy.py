@@ -15,14 +15,17 @@ that the caller ignores (the robot's own bodies).
 
 :class:`Occupancy` is a snapshot of the map as a scene shape: every occupied voxel is an axis-aligned box of edge
 ``resolution`` in the obstacle's frame. :class:`~taplan.scene.CollisionWorld` asks it for capsule distances
-(:meth:`Occupancy.capsule_distances`): per robot body the exact distance to the nearest voxel box. The voxels are
-first merged into larger boxes covering exactly the same space (:func:`merge_voxels`: runs along z, then equal runs
-along y, then along x; a table top of 50,000 voxels becomes a handful of boxes), so the distance to the union is
-the smallest distance to a merged box. The boxes are grouped by the 8x8x8-voxel block of their centre for a broad
-phase: each block's tight bounding box gives a lower bound, the exact distance to the block's largest box an upper
-bound, and only blocks whose lower bound is under the best upper bound are opened. A segment's distance to a box is
-found exactly: the squared distance is piecewise quadratic in the segment parameter between the (at most six) face
-crossings.
+(:meth:`Occupancy.capsule_distances`): per robot body the exact distance to the nearest voxel box, or a lower bound
+where the caller says one is enough (beyond ``cutoff`` / ``bound_beyond``). The voxels' surface
+(:class:`~taplan.scene.voxel_surface.VoxelSurface`: the occupied voxels with a free face neighbour, a coarse
+distance field and a k-d tree of their centres) bounds every capsule from below in a few lookups and gives the exact
+distance of the near ones from the few surface voxels around them. An exact distance asked of a far capsule goes
+through the merged boxes instead: the voxels merged into larger boxes covering exactly the same space
+(:func:`merge_voxels`: runs along z, then equal runs along y, then along x; a table top of 50,000 voxels becomes a
+handful of boxes), grouped by the 8x8x8-voxel block of their centre for a broad phase: each block's tight bounding
+box gives a lower bound, the exact distance to the block's largest box an upper bound, and only blocks whose lower
+bound is under the best upper bound are opened. A segment's distance to a box is found exactly: the squared
+distance is piecewise quadratic in the segment parameter between the (at most six) face crossings.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ import numpy.typing as npt
 
 from taplan.errors import InvalidInputError
 from taplan.scene.shapes import Shape
+from taplan.scene.voxel_surface import VoxelSurface
 
 __all__ = [
     "Occupancy",
@@ -50,6 +54,7 @@ DEFAULT_RESOLUTION = 0.02  # [m]
 # the TeleAvatar's reach in its root frame (shoulder base), with room: x forward, y left, z up [m]
 DEFAULT_BOUNDS = ((-0.6, -1.2, -1.0), (1.4, 1.2, 1.0))
 BLOCK = 8  # voxels per block edge in the broad phase
+NEAR = 0.2  # [m] exact distances asked of capsules farther than this come from the blocks, not the surface
 
 
 def _bounds(bounds: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -159,11 +164,18 @@ class Occupancy(Shape):
             raise InvalidInputError("voxels", f"shape {voxels.shape} {voxels.dtype}", "(N, 3) integer indices")
         object.__setattr__(self, "origin", origin)
         object.__setattr__(self, "voxels", voxels.astype(np.int64))
-        self._build_blocks()
+        object.__setattr__(self, "_lo", origin + self.voxels * self.resolution)
+        # the surface index answers the queries; the merged boxes and their blocks are built when first needed
+        surface = VoxelSurface(self.resolution, origin, self.voxels) if len(self.voxels) else None
+        object.__setattr__(self, "_surface", surface)
+        object.__setattr__(self, "_blocks_built", False)
 
     def _build_blocks(self) -> None:
         """Merge the voxels into boxes, group the boxes by the block of their centre, and keep per block its box
-        range, tight bounding box and largest box."""
+        range, tight bounding box and largest box (once)."""
+        if self._blocks_built:
+            return
+        object.__setattr__(self, "_blocks_built", True)
         h = self.resolution
         lo_index, hi_index = merge_voxels(self.voxels)
         block = (lo_index + hi_index) // (2 * BLOCK)
@@ -186,7 +198,6 @@ class Occupancy(Shape):
             representative = np.zeros(0, int)
         object.__setattr__(self, "_block_centre", (block_lo + block_hi) / 2)
         object.__setattr__(self, "_block_radius", np.linalg.norm(block_hi - block_lo, axis=1) / 2)
-        object.__setattr__(self, "_lo", self.origin + self.voxels * h)
         object.__setattr__(self, "_box_lo", box_lo)
         object.__setattr__(self, "_box_hi", box_hi)
         object.__setattr__(self, "_starts", starts)
@@ -197,6 +208,7 @@ class Occupancy(Shape):
 
     def merged_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """The merged boxes ``(lo, hi)`` [m] (M, 3) in the obstacle frame: exactly the occupied space."""
+        self._build_blocks()
         return self._box_lo, self._box_hi
 
     def __len__(self) -> int:
@@ -244,10 +256,36 @@ class Occupancy(Shape):
         distance [m] to the nearest voxel box, witness points on the capsule and on the box, and the unit normal
         from the box to the capsule.
 
-        Capsules farther than ``cutoff`` report a lower bound above it; capsules whose nearest block is farther than
-        ``bound_beyond`` report that block's distance (a lower bound). A capsule whose axis enters a voxel reports
-        ``-radius`` (in collision; the depth is not computed). No voxels: ``inf`` for every capsule.
+        Capsules farther than ``cutoff`` report a lower bound above it; capsules farther than ``bound_beyond``
+        report a lower bound of their distance. A capsule whose axis enters a voxel reports ``-radius`` (in
+        collision; the depth is not computed). No voxels: ``inf`` for every capsule.
+
+        The voxels' surface (:class:`~taplan.scene.voxel_surface.VoxelSurface`) bounds every capsule and answers
+        the near ones exactly; capsules it leaves open (an exact distance asked for a far capsule) go through the
+        merged boxes' block broad phase.
         """
+        starts, ends = np.asarray(starts, dtype=float), np.asarray(ends, dtype=float)
+        radii = np.asarray(radii, dtype=float)
+        C = len(starts)
+        if self._surface is None or not C:
+            return np.full(C, np.inf), starts.copy(), starts.copy(), np.tile([0.0, 0.0, 1.0], (C, 1))
+        d, pa, pb, n, _, unresolved = self._surface.capsules(starts, ends, radii, min(cutoff, bound_beyond), NEAR)
+        rows = np.flatnonzero(unresolved)
+        if len(rows):
+            # exact (a bound near the limit from the blocks could exceed the distance)
+            d[rows], pa[rows], pb[rows], n[rows] = self._block_distances(starts[rows], ends[rows], radii[rows])
+        return d, pa, pb, n
+
+    def _block_distances(
+        self,
+        starts: np.ndarray,
+        ends: np.ndarray,
+        radii: np.ndarray,
+        cutoff: float = math.inf,
+        bound_beyond: float = math.inf,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`capsule_distances` through the merged boxes grouped by 8x8x8-voxel blocks (see the module)."""
+        self._build_blocks()
         C = len(starts)
         d = np.full(C, np.inf)
         pa = np.array(starts, dtype=float)

@@ -386,7 +386,8 @@ class CollisionWorld:
             return [self.distances(q, cutoff=cutoff) for q in Q]
         engine = self.engine()
         if engine is not None:
-            batch = engine.evaluate(Q, jacobian=True)
+            # pairs beyond the cutoff are dropped: their lower bounds (no exact query) are enough to drop them
+            batch = engine.evaluate(Q, jacobian=True, bound_beyond=cutoff)
             return [self._from_batch(batch, n, cutoff) for n in range(len(Q))]
         model, data = self.model, self.data
         joints = self._body_joint.tolist()
