@@ -141,7 +141,7 @@ def test_sampled_plan_whose_smoothing_does_not_fit_is_returned_unsmoothed(
     goal = _goal(robot)
     start = robot.home
     world = _plate_below(robot, goal, 0.05)
-    monkeypatch.setattr(motion, "SMOOTH_HEADROOM", 1e6)  # no budget can fit the smoothing now
+    monkeypatch.setattr(motion, "SMOOTH_MIN", 1e6)  # no budget can fit the smoothing now
     plan = plan_motion(robot, start, goal, world=world, stages=("rrt-connect",), max_time=5.0, seed=1)
     assert plan.report.stage == "rrt-connect" and not plan.report.smoothed
     assert any("unsmoothed" in note for note in plan.report.notes)

@@ -14,9 +14,10 @@
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
    straight line, then from polylines through perturbed midpoints (``"optimization"``; the straight line only, for
-   a quarter of the search time, when the sampler follows); RRT-Connect (:mod:`~taplan.planning.rrt`, exploring
-   with a compiled clearance test; when both arms move, first one arm after the other) with shortcutting, then the
-   optimiser as its smoother (``"rrt-connect"``); in
+   a quarter of the search time and ``OPTIMIZE_ITERATIONS`` QPs, when the sampler follows); RRT-Connect
+   (:mod:`~taplan.planning.rrt`, exploring with a compiled clearance test; when both arms move, first one arm
+   after the other) with shortcutting, then smoothed with the same test (the arms moved together, shortcuts along
+   the path, corners blended), resampled evenly and certified again (``"rrt-connect"``); in
    a passage too narrow for the margin the sampler's margin shrinks to half, then to the floor
    (``report.margin``). Every edge keeps at least half its margin by conservative advancement
    (:mod:`~taplan.planning.verify`).
@@ -30,8 +31,9 @@
    says which and why; a plan that fails is never returned: PlanningError.
 
 ``max_time`` bounds the whole call: the goal IK stops seeding after half of it, the path search leaves
-``FINISH_SHARE`` of it (0.05–2 s) for timing and verification, a sampled path is smoothed only when the time left
-covers 2.5 times what its timing and verification took (else the certified unsmoothed plan, with a note), and every
+``FINISH_SHARE`` of it (0.05–2 s) for timing and verification, a sampled path is smoothed in ``SMOOTH_SHARE`` of
+the time left and its fastest timing verified in half of what then remains (else the certified unsmoothed path,
+with its fallback timings and a note), and every
 stage checks the deadline between its indivisible steps: the call ends within ``max_time + BUDGET_TOLERANCE``.
 """
 
@@ -47,9 +49,16 @@ import numpy.typing as npt
 
 from taplan.errors import InvalidInputError, PlanningError, TaplanError, TimingError
 from taplan.limits import JointLimits
+from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
-from taplan.planning.optimize import optimize_path
-from taplan.planning.rrt import rrt_connect_groups, rrt_connect_shrinking
+from taplan.planning.optimize import optimize_path, resample
+from taplan.planning.rrt import (
+    SPACING_SHARE,
+    certify_path,
+    rrt_connect_groups,
+    rrt_connect_shrinking,
+    smooth_path,
+)
 from taplan.planning.verify import MIN_CERTIFIED, SegmentCheck, Verification, check_segment, verify_trajectory
 from taplan.robot import Robot
 from taplan.scene.scene import Scene, as_pose
@@ -69,8 +78,12 @@ TIMING_POINTS = 4
 BUDGET_TOLERANCE = 0.2  # [s] documented overrun of max_time: one indivisible step (an IK solve, a QP, a timing)
 IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
 FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path search leaves this for timing + verify
-SMOOTH_HEADROOM, SMOOTH_MIN = 2.5, 0.05  # smoothing runs when the time left exceeds 2.5x the finish + 0.05 s
+SMOOTH_SHARE, SMOOTH_MIN = 0.3, 0.05  # [-, s] a sampled path's smoothing gets this share of the time left, if >= 0.05 s
 OPTIMIZE_SHARE = 0.25  # of the search time, for the optimiser from the straight line when the sampler follows it
+# QPs of that optimiser: on the 39 + 80 benchmark problems it solved 2/3 of those it solves in <= 8 (2-8 QPs,
+# 40-450 ms CPU); those needing more (9-28 QPs, 0.4-2.6 s) and those it never solves go to the sampler, whose
+# smoothed plans take 0.2-0.6 s
+OPTIMIZE_ITERATIONS = 8
 MARGIN_SHARES = 0.7  # of the time left, for the sampler at each margin but the last (the floor gets the rest)
 GROUPS_SHARE = 0.5  # of the sampler's time, for one arm after the other when both move (then both at once)
 
@@ -92,7 +105,7 @@ class PlanReport:
         waypoints: Waypoints of the geometric path before densifying.
         timing_attempts: Timings tried until one was verified.
         goal: The goal configuration [rad] (the IK solution for a pose goal).
-        smoothed: True when the sampled path was shortened by the optimiser (stage ``"rrt-connect"``).
+        smoothed: True when the plan follows the smoothed sampled path (stage ``"rrt-connect"``).
         approaches: The bent ends: a start or goal closer than the margin (but clear of the floor) is left or
             approached along a short certified segment (:class:`~taplan.planning.ends.Approach`: where, how close,
             what is certified).
@@ -180,16 +193,26 @@ def _find_path(
             if certificate.valid:
                 return stage, [q0, q1], certificate, margin
         elif stage == "optimization":
-            cap, perturbed = deadline, PERTURBED_SEEDS
+            cap, perturbed, iterations = deadline, PERTURBED_SEEDS, 30
             compiled = not any(hasattr(o.shape, "capsule_distances") for o in world.scene.obstacles.values())
             if "rrt-connect" in stages[index + 1 :] and compiled:  # perceived occupancy: the sampler is slow
                 # the sampler's path through the passage (smoothed later) is a better second seed than a random
-                # midpoint: the straight line only, for a share of the time
+                # midpoint: the straight line only, for a share of the time and OPTIMIZE_ITERATIONS QPs
                 cap, perturbed = clock + OPTIMIZE_SHARE * max(deadline - clock, 0.0), 0
+                iterations = OPTIMIZE_ITERATIONS
             for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, perturbed, rng):
                 if time.perf_counter() >= cap:
                     break
-                result = optimize_path(world, seed_path, active, limits.lower, limits.upper, margin, deadline=cap)
+                result = optimize_path(
+                    world,
+                    seed_path,
+                    active,
+                    limits.lower,
+                    limits.upper,
+                    margin,
+                    max_iterations=iterations,
+                    deadline=cap,
+                )
                 if result is not None:
                     times["optimize"] += time.perf_counter() - clock
                     return stage, list(result.path), None, margin
@@ -215,6 +238,36 @@ def _find_path(
                 return stage, sampled[0], None, sampled[1]
             times["sample"] += time.perf_counter() - clock
     return None
+
+
+def _smooth_sampled(
+    world: CollisionWorld,
+    path: list[np.ndarray],
+    active: np.ndarray,
+    margin: float,
+    rng: np.random.Generator,
+    deadline: float,
+) -> list[np.ndarray] | None:
+    """The sampled ``path`` smoothed with the sampler's compiled test (:func:`~taplan.planning.rrt.smooth_path`:
+    the arms synchronised, shortcuts, corners blended), resampled to evenly spaced waypoints (the timing's spline
+    has uniform knots: uneven waypoints make it swerve and slow down) and certified edge by edge to keep
+    ``margin / 2``; None when that does not finish before ``deadline``."""
+    groups = [np.intersect1d(g.indices, active) for g in world.robot.groups.values()]
+    check = ClearanceCheck(world, margin, active)
+    smooth = smooth_path(
+        lambda a, b: check.motion(a, b, SPACING_SHARE * margin),
+        path,
+        active,
+        [g for g in groups if g.size],
+        rng=rng,
+        deadline=deadline,
+    )
+    geometric = np.array(smooth)
+    count = max(2, int(np.ceil(_length(geometric) / DENSIFY_STEP)) + 1)
+    even = list(resample(geometric, count))
+    if not all(check(q) for q in even[1:-1]):  # the waypoints keep the margin, like every planner path's
+        return None
+    return certify_path(world, even, margin, deadline)
 
 
 def _length(path: np.ndarray) -> float:
@@ -708,47 +761,34 @@ def plan_motion(
         stage, path, certificate, kept = found
     else:
         stage, path, certificate, kept = "straight", [a, b], None, margin  # both ends retreat to one clear one
-    clock = time.perf_counter()
-    timed = _time_and_verify(
-        robot, world, path, approaches, active, limits, q0, q1, kept, max_deviation, deadline, times, certificate
-    )
-    finish = time.perf_counter() - clock
-    if isinstance(timed, str):
-        raise PlanningError(timed)
-
     notes: list[str] = []
     if kept < margin:
         notes.append(
             f"no path that keeps the {margin * 1e3:.1f} mm margin was found in time; this one keeps "
             f"{kept * 1e3:.2f} mm (edges half, the timed trajectory a quarter)"
         )
+    timed: _Timed | str | None = None
     smoothed = False
     if stage == "rrt-connect":
-        # the certified unsmoothed plan is in hand: smoothing must leave room to time and verify its result
+        # the sampled path is smoothed first (tens of ms) and only its fastest timing tried: the certified unsmoothed
+        # path, with the whole fallback chain, is the plan when that fails
         left = deadline - time.perf_counter()
-        if left < SMOOTH_HEADROOM * finish + SMOOTH_MIN:
+        if left < SMOOTH_MIN:
             notes.append(
-                f"smoothing skipped: {max(left, 0.0):.2f} s of the {max_time:g} s budget left (timing and "
-                f"verification took {finish:.2f} s); the certified unsmoothed path is returned"
+                f"smoothing skipped: {max(left, 0.0):.2f} s of the {max_time:g} s budget left; the certified "
+                "unsmoothed path is returned"
             )
         else:
             clock = time.perf_counter()
-            smooth = optimize_path(
-                world,
-                np.array(path),
-                active,
-                limits.lower,
-                limits.upper,
-                kept,
-                max_iterations=15,
-                deadline=deadline - SMOOTH_HEADROOM / 2 * finish,
-            )
+            smooth = _smooth_sampled(world, path, active, kept, rng, clock + SMOOTH_SHARE * left)
             times["smooth"] += time.perf_counter() - clock
-            if smooth is not None and _length(smooth.path) < _length(np.array(path)):
+            if smooth is None:
+                notes.append("the smoothed path was not certified in time; the certified unsmoothed path is returned")
+            else:  # half the time left: the other half times and verifies the unsmoothed path if this fails
                 better = _time_and_verify(
                     robot,
                     world,
-                    list(smooth.path),
+                    smooth,
                     approaches,
                     active,
                     limits,
@@ -756,7 +796,7 @@ def plan_motion(
                     q1,
                     kept,
                     max_deviation,
-                    deadline,
+                    (time.perf_counter() + deadline) / 2,
                     times,
                     fallbacks=False,
                 )
@@ -765,11 +805,13 @@ def plan_motion(
                         f"the smoothed path was not used ({better}); the certified unsmoothed path is returned"
                     )
                 else:
-                    path, timed, smoothed = list(smooth.path), better, True
-            elif time.perf_counter() >= deadline - SMOOTH_HEADROOM / 2 * finish:
-                notes.append(
-                    "smoothing did not finish within the time budget; the certified unsmoothed path is returned"
-                )
+                    path, timed, smoothed = smooth, better, True
+    if timed is None:
+        timed = _time_and_verify(
+            robot, world, path, approaches, active, limits, q0, q1, kept, max_deviation, deadline, times, certificate
+        )
+        if isinstance(timed, str):
+            raise PlanningError(timed)
     geometric = np.array(path)
     report = PlanReport(
         success=True,

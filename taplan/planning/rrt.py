@@ -14,6 +14,10 @@ with the same test and then every edge certified by conservative advancement
 (:func:`~taplan.planning.verify.check_segment`) to keep ``margin / 2``; a refused edge is split and certified in
 halves, and a path that still fails is dropped and the search goes on.
 
+The found path is then smoothed with the same fast test (:func:`smooth_path`: the arms moved together instead of
+one after the other, shortcuts between points along the path, corners blended; tens of milliseconds where the
+optimiser as a smoother took 0.5-2.5 s) and certified again by the caller.
+
 taplan's own implementation rather than OMPL's: the ``ompl`` wheel is a large binary dependency for one stage.
 OMPL's RRT-Connect is the peer in ``benchmarks/bench_planning.py``.
 """
@@ -29,7 +33,16 @@ from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.verify import check_segment, check_segments
 from taplan.scene.world import CollisionWorld
 
-__all__ = ["rrt_connect", "rrt_connect_shrinking", "rrt_connect_groups", "shortcut", "certify_path"]
+__all__ = [
+    "rrt_connect",
+    "rrt_connect_shrinking",
+    "rrt_connect_groups",
+    "shortcut",
+    "certify_path",
+    "smooth_path",
+    "synchronise",
+    "blend_corners",
+]
 
 STEP = 1.2  # [rad] longest extension of a tree toward a sample (max-norm over the moving joints)
 SPACING_SHARE = 2.5  # tested states are at most this share of the margin of robot-point travel apart (module doc)
@@ -287,3 +300,135 @@ def shortcut(
         if check_segment(world, path[i], path[j], margin).valid:
             path = path[: i + 1] + path[j:]
     return path
+
+
+def _arc_lengths(path: list[np.ndarray], joints: np.ndarray) -> np.ndarray:
+    steps = [np.linalg.norm((b - a)[joints]) for a, b in zip(path[:-1], path[1:], strict=True)]
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def _point_on(path: list[np.ndarray], s: np.ndarray, length: float) -> tuple[int, np.ndarray]:
+    """(index of the segment, configuration) at arc length ``length`` (``s``: the vertices' arc lengths)."""
+    k = int(np.clip(np.searchsorted(s, length, side="right") - 1, 0, len(path) - 2))
+    span = s[k + 1] - s[k]
+    t = 0.0 if span <= 0 else (length - s[k]) / span
+    return k, path[k] + t * (path[k + 1] - path[k])
+
+
+def _valid_path(valid_motion: Any, path: list[np.ndarray]) -> bool:
+    return all(valid_motion(a, b) for a, b in zip(path[:-1], path[1:], strict=True))
+
+
+def _dedupe(path: list[np.ndarray]) -> list[np.ndarray]:
+    return [q for k, q in enumerate(path) if k == 0 or np.abs(q - path[k - 1]).max() > 1e-9]
+
+
+def synchronise(valid_motion: Any, path: list[np.ndarray], groups: list[np.ndarray]) -> list[np.ndarray]:
+    """The groups (e.g. the arms) moving at once, each along its own part of ``path`` at the same fraction of its
+    own arc length (a path that moves one arm after the other becomes one that moves both together: the duration of
+    the longer instead of the sum), when every new edge passes ``valid_motion``; else ``path``."""
+    moving = [g for g in groups if _arc_lengths(path, g)[-1] > 0]
+    if len(moving) < 2:
+        return path
+    P = np.array(path)
+    fractions = []
+    for g in moving:
+        s = _arc_lengths(path, g)
+        fractions.append(s / s[-1])
+    u = np.unique(np.concatenate(fractions))
+    out = np.repeat(P[:1], len(u), axis=0)
+    for g, f in zip(moving, fractions, strict=True):
+        keep = np.concatenate([[True], np.diff(f) > 0])  # the group's own vertices (where it moved)
+        for j in g:
+            out[:, j] = np.interp(u, f[keep], P[keep, j])
+    candidate = _dedupe(list(out))
+    return candidate if _valid_path(valid_motion, candidate) else path
+
+
+def smooth_path(
+    valid_motion: Any,
+    path: list[np.ndarray],
+    active: np.ndarray,
+    groups: list[np.ndarray] = (),
+    *,
+    shortcuts: int = 40,
+    blend: bool = True,
+    rng: np.random.Generator | None = None,
+    deadline: float = float("inf"),
+) -> list[np.ndarray]:
+    """Shorter and rounder, with the sampler's fast test only: the groups synchronised (:func:`synchronise`), then
+    ``shortcuts`` tries between random points along the path (not only its vertices: OMPL's ``shortcutPath``), in
+    all the active joints or, every other try, in one group's (a partial shortcut: the other joints keep their
+    motion), each kept when shorter and every new edge passes ``valid_motion``, then (``blend``) the corners
+    blended (:func:`blend_corners`). Nothing is certified here: the caller certifies the result."""
+    rng = rng or np.random.default_rng(0)
+    path = _dedupe([np.asarray(q, dtype=float) for q in path])
+    groups = [np.asarray(g) for g in groups if np.size(g)]
+    path = synchronise(valid_motion, path, groups)
+    choices = [np.asarray(active)] + groups
+    for attempt in range(shortcuts):
+        if len(path) <= 2 or time.perf_counter() >= deadline:
+            break
+        joints = choices[0] if attempt % 2 == 0 or len(choices) == 1 else choices[int(rng.integers(1, len(choices)))]
+        s = _arc_lengths(path, active)
+        a_len, b_len = np.sort(rng.uniform(0.0, s[-1], 2))
+        i, a = _point_on(path, s, a_len)
+        j, b = _point_on(path, s, b_len)
+        if i == j:
+            continue
+        if joints is choices[0]:
+            middle: list[np.ndarray] = []
+        else:  # the group goes straight from a to b, the others keep their vertices in between
+            middle = []
+            for k in range(i + 1, j + 1):
+                q = path[k].copy()
+                q[joints] = a[joints] + (s[k] - a_len) / (b_len - a_len) * (b[joints] - a[joints])
+                middle.append(q)
+        candidate = [a] + middle + [b]
+        old = path[i + 1 : j + 1]
+        before = _arc_lengths([a] + old + [b], active)[-1]
+        if _arc_lengths(candidate, active)[-1] < before - 1e-6 and _valid_path(valid_motion, candidate):
+            path = _dedupe(path[: i + 1] + candidate + path[j + 1 :])
+    if blend:
+        path = blend_corners(valid_motion, path, active, deadline=deadline)
+    return path
+
+
+BLEND_STEP = 0.05  # [rad] chord of a corner's blend (Euclidean over the active joints)
+BLEND_TRIES = 3  # blend sizes tried per corner: the largest that fits, then halves
+
+
+def blend_corners(
+    valid_motion: Any, path: list[np.ndarray], active: np.ndarray, *, deadline: float = float("inf")
+) -> list[np.ndarray]:
+    """Every interior corner replaced by a parabolic blend (a quadratic Bezier curve from a point on the incoming
+    edge through the corner's pull to a point on the outgoing edge, as chords ``BLEND_STEP`` long) where it passes
+    ``valid_motion``: the largest that fits (half of each adjacent edge), else halved, else the corner stays.
+
+    A corner of a polyline is a stop for the timing (the spline through the densified path turns within one
+    0.1 rad step: its curvature caps the speed there); a blend of size ``d`` caps it at about ``sqrt(a d / θ)``."""
+    if len(path) <= 2:
+        return path
+    P = [np.asarray(q, dtype=float) for q in path]
+    lengths = [float(np.linalg.norm((b - a)[active])) for a, b in zip(P[:-1], P[1:], strict=True)]
+    out = [P[0]]
+    for k in range(1, len(P) - 1):
+        before, corner, after = P[k - 1], P[k], P[k + 1]
+        blended = False
+        # half of each edge: the neighbouring corners' blends use the other halves
+        size = 0.5 * min(lengths[k - 1], lengths[k])
+        for _ in range(BLEND_TRIES if time.perf_counter() < deadline else 0):
+            a = corner + size / lengths[k - 1] * (before - corner)
+            b = corner + size / lengths[k] * (after - corner)
+            count = max(2, int(np.ceil(2 * size / BLEND_STEP)))
+            t = np.linspace(0.0, 1.0, count + 1)[:, None]
+            curve = list((1 - t) ** 2 * a + 2 * t * (1 - t) * corner + t**2 * b)
+            if _valid_path(valid_motion, curve):
+                out += curve
+                blended = True
+                break
+            size /= 2
+        if not blended:
+            out.append(corner)
+    out.append(P[-1])
+    return _dedupe(out)
