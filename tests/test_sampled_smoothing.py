@@ -10,9 +10,17 @@ import numpy as np
 import pytest
 
 import taplan
+from taplan.errors import PlanningError
 from taplan.planning import motion, plan_motion
 from taplan.planning.compiled_check import ClearanceCheck
-from taplan.planning.rrt import SPACING_SHARE, blend_corners, rrt_connect_shrinking, smooth_path, synchronise
+from taplan.planning.rrt import (
+    SPACING_SHARE,
+    blend_corners,
+    rrt_connect_shrinking,
+    smooth_path,
+    spline_path,
+    synchronise,
+)
 from taplan.planning.verify import check_segment
 from taplan.scene import Box, CollisionWorld, Scene
 
@@ -216,6 +224,29 @@ def test_the_optimiser_before_the_sampler_gets_a_bounded_number_of_qps(
     plan_motion(robot, robot.home, goal, world=world, max_time=10.0, seed=0)
     assert asked and asked[0] == motion.OPTIMIZE_ITERATIONS
     asked.clear()
-    with contextlib.suppress(taplan.PlanningError):
+    with contextlib.suppress(PlanningError):
         plan_motion(robot, robot.home, goal, world=world, stages=("straight", "optimization"), max_time=10.0)
     assert asked and asked[0] > motion.OPTIMIZE_ITERATIONS
+
+
+def test_the_spline_spreads_a_corner_and_keeps_the_ends(robot: taplan.Robot) -> None:
+    """A right-angle corner becomes a curve through evenly spaced points whose turn per point is small, from the
+    first to the last configuration exactly; the joints that do not move keep their values; a refused spline leaves
+    the path as it was."""
+    right = np.array(robot.group("right").indices)
+    corner = robot.home.copy()
+    corner[right[0]] += 1.0
+    end = corner.copy()
+    end[right[1]] -= 1.0
+    path = [robot.home.copy(), corner, end]
+    curve = spline_path(lambda a, b: True, path, right)
+    np.testing.assert_array_equal(curve[0], path[0])
+    np.testing.assert_array_equal(curve[-1], path[-1])
+    others = np.setdiff1d(np.arange(robot.nq), right)
+    assert all(np.array_equal(q[others], robot.home[others]) for q in curve)
+    steps = np.diff(np.array(curve)[:, right], axis=0)
+    assert np.linalg.norm(steps, axis=1).max() <= 0.1 + 1e-9  # [rad] sampled finely
+    unit = steps / np.linalg.norm(steps, axis=1)[:, None]
+    turns = np.arccos(np.clip(np.sum(unit[:-1] * unit[1:], axis=1), -1.0, 1.0))
+    assert max(turns) < np.pi / 8  # the 90 degree turn spread over many points
+    assert spline_path(lambda a, b: False, path, right) is path

@@ -10,6 +10,9 @@ nothing. Perceived occupancy (voxels that answer their own distances) is tested 
 Every path it finds is certified afterwards by conservative advancement (:func:`~taplan.planning.verify.
 check_segment`), which stays the planner's only guarantee.
 
+The geometry model is built once per world and scene version (a build took ~20 ms; the sampler makes several
+tests per plan: per arm, per margin, the smoothing); each test has its own data with the pairs it needs active.
+
 Given the joints that move (``active``), the pairs whose two members both stay put (an obstacle, the torso, the held
 arm) are left out: their distance is that of the start, which the planner checked before sampling; a one-arm search
 then tests about half the pairs.
@@ -20,6 +23,8 @@ between them (``Σ reach_j |Δq_j|``), in bisection order (the middle first: a b
 
 from __future__ import annotations
 
+import weakref
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
@@ -57,13 +62,63 @@ def _moved_by(model: pin.Model, joint: int, active: np.ndarray) -> bool:
     return any(model.joints[j].idx_q in indices for j in model.supports[joint] if j > 0)
 
 
+@dataclass(frozen=True)
+class _Geometry:
+    """A world's bodies and every active pair as a pinocchio ``GeometryModel`` (``pairs`` in its pair order) and the
+    joint carrying each body (``joints``, by name)."""
+
+    geometry: Any
+    pairs: list[tuple[str, str]]
+    joints: dict[str, int]
+
+
+# per world, the geometry of its current bodies and scene: the sampler builds several tests per plan (per arm, per
+# margin, the smoothing) and a build took ~20 ms (a distance evaluation for the pair list, a placement per capsule)
+_BUILT: weakref.WeakKeyDictionary[CollisionWorld, tuple[Any, _Geometry]] = weakref.WeakKeyDictionary()
+
+
+def _geometry(world: CollisionWorld) -> _Geometry:
+    import coal
+
+    robot = world.robot
+    key = (world.scene.version, tuple((b.name, b.joint, b.radius, *b.start, *b.end) for b in world.bodies))
+    cached = _BUILT.get(world)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    geometry = pin.GeometryModel()
+    ids: dict[str, int] = {}
+    for body in world.bodies:
+        length = float(np.linalg.norm(body.end - body.start))
+        shape = coal.Capsule(body.radius, length) if length > 1e-9 else coal.Sphere(body.radius)
+        placement = _capsule_placement(np.asarray(body.start, float), np.asarray(body.end, float))
+        ids[body.name] = geometry.addGeometryObject(pin.GeometryObject(body.name, body.joint, placement, shape))
+    for obstacle in world.scene.obstacles.values():
+        if hasattr(obstacle.shape, "capsule_distances"):
+            continue  # perceived occupancy: tested by ClearanceCheck.fields
+        placement = pin.SE3(obstacle.pose[:3, :3], obstacle.pose[:3, 3])
+        ids[obstacle.name] = geometry.addGeometryObject(
+            pin.GeometryObject(obstacle.name, 0, placement, obstacle.shape.to_coal())
+        )
+    for attached in world.scene.attached.values():
+        frame = robot.model.frames[robot.frame_id(attached.frame)]
+        placement = frame.placement * pin.SE3(attached.pose[:3, :3], attached.pose[:3, 3])
+        ids[attached.name] = geometry.addGeometryObject(
+            pin.GeometryObject(attached.name, frame.parentJoint, placement, attached.shape.to_coal())
+        )
+    pairs = [(a, b) for a, b in world.distances(robot.home, jacobian=False).pairs if a in ids and b in ids]
+    for a, b in pairs:
+        geometry.addCollisionPair(pin.CollisionPair(ids[a], ids[b]))
+    joints = {geometry.geometryObjects[i].name: geometry.geometryObjects[i].parentJoint for i in ids.values()}
+    built = _Geometry(geometry, pairs, joints)
+    _BUILT[world] = (key, built)
+    return built
+
+
 class ClearanceCheck:
     """Whether a configuration keeps ``clearance`` [m] on every active pair of ``world`` (see the module); with
     ``active`` (configuration indices), on the pairs that those joints move."""
 
     def __init__(self, world: CollisionWorld, clearance: float, active: np.ndarray | None = None) -> None:
-        import coal
-
         robot = world.robot
         world.max_point_speed_bound(robot.home, robot.home)  # brings the world's attached objects and reach up to date
         self.world = world
@@ -80,39 +135,16 @@ class ClearanceCheck:
             self.fields = FieldClearance(world, self.clearance, active)
             if not self.fields.ready:
                 return  # no distance engine for the bodies' segments: the world's (slower) test is used
-        self.geometry = pin.GeometryModel()
-        ids: dict[str, int] = {}
-        for body in world.bodies:
-            length = float(np.linalg.norm(body.end - body.start))
-            shape = coal.Capsule(body.radius, length) if length > 1e-9 else coal.Sphere(body.radius)
-            placement = _capsule_placement(np.asarray(body.start, float), np.asarray(body.end, float))
-            ids[body.name] = self.geometry.addGeometryObject(
-                pin.GeometryObject(body.name, body.joint, placement, shape)
-            )
-        for obstacle in world.scene.obstacles.values():
-            if hasattr(obstacle.shape, "capsule_distances"):
-                continue  # tested by self.fields
-            placement = pin.SE3(obstacle.pose[:3, :3], obstacle.pose[:3, 3])
-            ids[obstacle.name] = self.geometry.addGeometryObject(
-                pin.GeometryObject(obstacle.name, 0, placement, obstacle.shape.to_coal())
-            )
-        for attached in world.scene.attached.values():
-            frame = self.model.frames[robot.frame_id(attached.frame)]
-            placement = frame.placement * pin.SE3(attached.pose[:3, :3], attached.pose[:3, 3])
-            ids[attached.name] = self.geometry.addGeometryObject(
-                pin.GeometryObject(attached.name, frame.parentJoint, placement, attached.shape.to_coal())
-            )
-        self.pairs = [(a, b) for a, b in world.distances(robot.home, jacobian=False).pairs if a in ids and b in ids]
+        built = _geometry(world)
+        self.geometry = built.geometry
+        keep = np.ones(len(built.pairs), dtype=bool)
         if active is not None:
-            joints = {
-                self.geometry.geometryObjects[i].name: self.geometry.geometryObjects[i].parentJoint
-                for i in ids.values()
-            }
-            moving = {name for name, joint in joints.items() if _moved_by(self.model, joint, active)}
-            self.pairs = [(a, b) for a, b in self.pairs if a in moving or b in moving]
-        for a, b in self.pairs:
-            self.geometry.addCollisionPair(pin.CollisionPair(ids[a], ids[b]))
+            moving = {name for name, joint in built.joints.items() if _moved_by(self.model, joint, active)}
+            keep = np.array([a in moving or b in moving for a, b in built.pairs], dtype=bool)
+        self.pairs = [pair for pair, k in zip(built.pairs, keep, strict=True) if k]
         self.geometry_data = pin.GeometryData(self.geometry)
+        for index in np.flatnonzero(~keep):
+            self.geometry_data.deactivateCollisionPair(int(index))
         for request in self.geometry_data.collisionRequests:
             request.security_margin = self.clearance
 

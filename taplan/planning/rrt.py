@@ -15,7 +15,7 @@ with the same test and then every edge certified by conservative advancement
 halves, and a path that still fails is dropped and the search goes on.
 
 The found path is then smoothed with the same fast test (:func:`smooth_path`: the arms moved together instead of
-one after the other, shortcuts between points along the path, corners blended; tens of milliseconds where the
+one after the other, shortcuts between points along the path, corners blended, a B-spline; 0.05-0.3 s where the
 optimiser as a smoother took 0.5-2.5 s) and certified again by the caller.
 
 taplan's own implementation rather than OMPL's: the ``ompl`` wheel is a large binary dependency for one stage.
@@ -42,6 +42,7 @@ __all__ = [
     "smooth_path",
     "synchronise",
     "blend_corners",
+    "spline_path",
 ]
 
 STEP = 1.2  # [rad] longest extension of a tree toward a sample (max-norm over the moving joints)
@@ -353,6 +354,7 @@ def smooth_path(
     *,
     shortcuts: int = 40,
     blend: bool = True,
+    spline: bool = True,
     rng: np.random.Generator | None = None,
     deadline: float = float("inf"),
 ) -> list[np.ndarray]:
@@ -360,7 +362,8 @@ def smooth_path(
     ``shortcuts`` tries between random points along the path (not only its vertices: OMPL's ``shortcutPath``), in
     all the active joints or, every other try, in one group's (a partial shortcut: the other joints keep their
     motion), each kept when shorter and every new edge passes ``valid_motion``, then (``blend``) the corners
-    blended (:func:`blend_corners`). Nothing is certified here: the caller certifies the result."""
+    blended (:func:`blend_corners`) and (``spline``) the path made a B-spline (:func:`spline_path`). Nothing is
+    certified here: the caller certifies the result."""
     rng = rng or np.random.default_rng(0)
     path = _dedupe([np.asarray(q, dtype=float) for q in path])
     groups = [np.asarray(g) for g in groups if np.size(g)]
@@ -391,6 +394,8 @@ def smooth_path(
             path = _dedupe(path[: i + 1] + candidate + path[j + 1 :])
     if blend:
         path = blend_corners(valid_motion, path, active, deadline=deadline)
+    if spline and time.perf_counter() < deadline:
+        path = spline_path(valid_motion, path, active)
     return path
 
 
@@ -432,3 +437,42 @@ def blend_corners(
             out.append(corner)
     out.append(P[-1])
     return _dedupe(out)
+
+
+SPLINE_SPACINGS = (0.8, 0.4, 0.2)  # [rad] control-point spacings tried for a smoothed path's B-spline, widest first
+SPLINE_SAMPLES = 0.1  # [rad] at most this far apart (Euclidean) the spline is sampled into a polyline
+
+
+def _bspline(control: np.ndarray, samples_per_span: int) -> np.ndarray:
+    """Points of the uniform cubic B-spline of ``control`` (M, n), its ends repeated three times so that the curve
+    starts and ends on them, ``samples_per_span`` points per span (the ends included)."""
+    P = np.concatenate([control[:1], control[:1], control, control[-1:], control[-1:]])
+    t = np.linspace(0.0, 1.0, samples_per_span + 1)[:-1]
+    basis = np.stack([(1 - t) ** 3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3], axis=1) / 6
+    spans = len(P) - 3
+    window = P[np.arange(spans)[:, None] + np.arange(4)[None, :]]  # (spans, 4, n)
+    points = np.einsum("sk,ckn->csn", basis, window).reshape(-1, P.shape[1])
+    points[0] = control[0]  # exactly (the weights' sum rounds)
+    return np.concatenate([points, control[-1:]])
+
+
+def spline_path(valid_motion: Any, path: list[np.ndarray], active: np.ndarray) -> list[np.ndarray]:
+    """The cubic B-spline whose control points are ``path`` resampled every ``SPLINE_SPACINGS[k]`` rad, sampled
+    as a polyline, for the widest spacing whose every edge passes ``valid_motion``; else ``path``. A B-spline
+    spreads each corner's turn over its control spacing (its curvature is continuous), which the timing needs: a
+    polyline's corner is a near stop."""
+    from taplan.planning.optimize import resample
+
+    P = np.array(path)
+    length = float(np.linalg.norm(np.diff(P[:, active], axis=0), axis=1).sum())
+    for spacing in SPLINE_SPACINGS:
+        count = int(np.ceil(length / spacing)) + 1
+        if count < 3:
+            continue
+        moved = _bspline(resample(P[:, active], count), max(1, int(np.ceil(spacing / SPLINE_SAMPLES))))
+        curve = np.repeat(P[:1], len(moved), axis=0)  # the joints that do not move keep their value exactly
+        curve[:, active] = moved
+        candidate = _dedupe(list(curve))
+        if _valid_path(valid_motion, candidate):
+            return candidate
+    return path
