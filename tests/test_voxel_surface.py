@@ -76,6 +76,8 @@ def test_capsule_distances_equal_every_box_and_bounds_stay_below() -> None:
             assert np.all((np.abs(bounded - exact) < 1e-12) | (exact > limit))  # exact within the limit
             if "cutoff" in kwargs:
                 assert np.all((bounded <= limit) == (exact <= limit))
+        if limit >= 0:  # the sampler's yes/no question: exactly "is the distance at least the clearance?"
+            assert np.array_equal(occupancy.capsules_clear(starts, ends, radii, limit), exact >= limit)
 
 
 def test_the_coarse_field_bounds_every_point_from_below() -> None:
@@ -141,3 +143,14 @@ def test_sampler_check_covers_occupancy_and_matches_the_world(robot: taplan.Robo
     truth = np.array([not world.in_collision(q, margin=0.02) for q in Q])
     assert np.array_equal(got, truth)
     assert 20 < got.sum() < len(Q) - 20
+    # edges: the end alone, then the other states in one batch; the same answer as every state tested alone
+    free = Q[truth]
+    outcomes = []
+    for a, b in zip(free[:-1:2], free[1::2], strict=False):
+        b = a + 0.3 * (b - a)
+        count = max(1, int(np.ceil(float(check.reach @ np.abs(b - a)) / 0.03)))
+        states = a + np.arange(1, count + 1)[:, None] / count * (b - a)
+        expected = all(not world.in_collision(s, margin=0.02) for s in states)
+        assert check.motion(a, b, 0.03) == expected
+        outcomes.append(expected)
+    assert 3 <= sum(outcomes) <= len(outcomes) - 3  # both answers occur

@@ -163,4 +163,14 @@ class ClearanceCheck:
         travel = float(self.reach @ np.abs(q_b - q_a))
         count = max(1, int(np.ceil(travel / spacing)))
         states = q_a + _bisection_order(count)[:, None] * (q_b - q_a)
-        return all(self(q) for q in states)
+        if self.fields is None or self.geometry is None or count == 1:
+            return all(self(q) for q in states)
+        # occupancy: the end alone (a blocked extension usually fails there), then the compiled pairs state by
+        # state and the occupancy for every other state in one batch (a query per call costs far more than a state)
+        if not self(states[0]):
+            return False
+        self.checks += count - 1
+        rest = states[1:]
+        if any(pin.computeCollisions(self.model, self.data, self.geometry, self.geometry_data, q, True) for q in rest):
+            return False
+        return bool(self.fields.many(rest).all())

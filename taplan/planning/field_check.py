@@ -85,6 +85,6 @@ class FieldClearance:
         clear = np.ones(N, dtype=bool)
         for o in self.fields:
             R, t = o.pose[:3, :3], o.pose[:3, 3]
-            d = o.shape.capsule_distances((starts - t) @ R, (ends - t) @ R, radii, self.clearance)[0]
-            clear[owner[d < self.clearance]] = False
+            ok = o.shape.capsules_clear((starts - t) @ R, (ends - t) @ R, radii, self.clearance)
+            clear[owner[~ok]] = False
         return clear

@@ -261,20 +261,37 @@ class Occupancy(Shape):
         collision; the depth is not computed). No voxels: ``inf`` for every capsule.
 
         The voxels' surface (:class:`~taplan.scene.voxel_surface.VoxelSurface`) bounds every capsule and answers
-        the near ones exactly; capsules it leaves open (an exact distance asked for a far capsule) go through the
-        merged boxes' block broad phase.
+        the near ones exactly; capsules it leaves open (an exact distance asked for a far capsule), and every
+        capsule when the limit is beyond ``NEAR`` (no cutoff: all exact), go through the merged boxes' block broad
+        phase.
         """
         starts, ends = np.asarray(starts, dtype=float), np.asarray(ends, dtype=float)
         radii = np.asarray(radii, dtype=float)
         C = len(starts)
         if self._surface is None or not C:
             return np.full(C, np.inf), starts.copy(), starts.copy(), np.tile([0.0, 0.0, 1.0], (C, 1))
+        if min(cutoff, bound_beyond) > NEAR:  # exact distances far out: the blocks are cheaper than the surface
+            return self._block_distances(starts, ends, radii, math.inf, bound_beyond)
         d, pa, pb, n, _, unresolved = self._surface.capsules(starts, ends, radii, min(cutoff, bound_beyond), NEAR)
         rows = np.flatnonzero(unresolved)
         if len(rows):
             # exact (a bound near the limit from the blocks could exceed the distance)
             d[rows], pa[rows], pb[rows], n[rows] = self._block_distances(starts[rows], ends[rows], radii[rows])
         return d, pa, pb, n
+
+    def capsules_clear(self, starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, clearance: float) -> np.ndarray:
+        """Per capsule (as in :meth:`capsule_distances`) whether its distance is at least ``clearance`` [m]: the
+        surface's lower bounds settle most capsules; the others get their exact distance."""
+        starts, ends = np.asarray(starts, dtype=float), np.asarray(ends, dtype=float)
+        radii = np.asarray(radii, dtype=float)
+        if self._surface is None or not len(starts):
+            return np.ones(len(starts), dtype=bool)
+        clear, undecided = self._surface.clear(starts, ends, radii, clearance)
+        rows = np.flatnonzero(undecided)
+        if len(rows):
+            d = self.capsule_distances(starts[rows], ends[rows], radii[rows], cutoff=clearance)[0]
+            clear[rows] = d >= clearance
+        return clear
 
     def _block_distances(
         self,
@@ -645,8 +662,8 @@ class OccupancyGrid:
         corner = max(abs(cx), abs(W - cx)) / fx, max(abs(cy), abs(H - cy)) / fy
         half_angle = math.atan(math.hypot(*corner))  # the cone around the image's frustum
         candidates = self._region_in_view(T_root_camera[:3, 3], T_root_camera[:3, 2], half_angle, max_range)
-        unknown = candidates & ~(self.occupied[keys] | self.free[keys])
-        keys, centres = keys[unknown], self._region_centres[unknown]
+        unknown = np.flatnonzero(candidates & ~(self.occupied[keys] | self.free[keys]))
+        keys, centres = keys.take(unknown), self._region_centres.take(unknown, axis=0)
         if not len(keys):
             return 0
         R, t = T_root_camera[:3, :3].astype(np.float32), T_root_camera[:3, 3].astype(np.float32)

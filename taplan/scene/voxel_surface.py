@@ -111,6 +111,26 @@ class VoxelSurface:
         points = starts[owner] + t[:, None] * (ends - starts)[owner]
         return points, owner, length / pieces
 
+    def clear(
+        self, starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, clearance: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Which capsules are at least ``clearance`` [m] from the union, by the lower bounds alone (no witnesses:
+        the sampler's yes/no question). Returns (clear (C,) bool, undecided (C,) bool: the bounds do not settle it,
+        e.g. an axis inside a voxel or a capsule really that close)."""
+        C = len(starts)
+        points, owner, spacing = self.samples(starts, ends)
+        need = (radii + clearance)[owner] + spacing[owner] / 2  # a sample's distance that clears its neighbourhood
+        short = self.coarse(points) < need
+        short |= self.inside(points)
+        if np.any(short):
+            ask = np.flatnonzero(short)
+            reach = float(np.max(need[ask])) + self.resolution * HALF_DIAGONAL + 1e-6
+            gap = self.tree.query(points[ask], k=1, distance_upper_bound=reach)[0]
+            short[ask] = gap - self.resolution * HALF_DIAGONAL < need[ask]  # inf (nothing in reach) clears
+        undecided = np.zeros(C, dtype=bool)
+        undecided[owner[short]] = True
+        return ~undecided, undecided
+
     def capsules(
         self, starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, limit: float, near: float
     ) -> tuple[np.ndarray, ...]:
