@@ -96,6 +96,20 @@ def test_jacobian_matches_finite_differences(robot: taplan.Robot) -> None:
         np.testing.assert_allclose((batch.jacobian[n] @ dq)[smooth], numeric[smooth], rtol=0, atol=FD_TOL)
 
 
+def test_jacobian_rows_within_a_distance_equal_the_full_rows(robot: taplan.Robot) -> None:
+    engine = CollisionWorld(robot, _scene(1)).engine()
+    Q = _configurations(robot, 12, 5)
+    full = engine.evaluate(Q)
+    within = 0.05  # [m]
+    near = engine.evaluate(Q, jacobian_within=within)
+    np.testing.assert_array_equal(near.distance, full.distance)
+    close = full.distance <= within
+    assert 0 < close.sum() < close.size  # some rows computed, some left out
+    np.testing.assert_allclose(near.jacobian[close], full.jacobian[close], rtol=0, atol=1e-15)
+    assert np.all(near.jacobian[~close] == 0.0)
+    assert np.any(full.jacobian[~close] != 0.0)
+
+
 def test_native_and_pinocchio_kinematics_agree(robot: taplan.Robot) -> None:
     world = CollisionWorld(robot, _scene(0))
     engine = DistanceEngine(world)

@@ -133,15 +133,20 @@ def _certify_batch(
     valid = np.ones(count, dtype=bool)
     columns: dict[tuple[str, str], int] = {}
     travel = np.zeros((0, world.model.nv))
+    mapped: list[tuple[tuple[tuple[str, str], ...], np.ndarray]] = []  # the engine's pair names, their columns
 
     def evaluate(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Distances (len(s), P) at the parameters; records the lowest per curve and fails curves below required."""
         nonlocal travel
         batch = world.distance_matrix(configurations(curve, s), bound_beyond=BOUND_BEYOND)
-        index = np.array([columns.setdefault(p, len(columns)) for p in batch.pairs], dtype=int)
-        if len(columns) > len(travel):
-            travel = np.vstack([travel, np.zeros((len(columns) - len(travel), travel.shape[1]))])
-        travel[index] = batch.travel
+        if mapped and mapped[0][0] is batch.pairs:  # the engine hands the same names every call: map them once
+            index = mapped[0][1]
+        else:
+            index = np.array([columns.setdefault(p, len(columns)) for p in batch.pairs], dtype=int)
+            mapped[:] = [(batch.pairs, index)]
+            if len(columns) > len(travel):
+                travel = np.vstack([travel, np.zeros((len(columns) - len(travel), travel.shape[1]))])
+            travel[index] = batch.travel
         d = np.full((len(s), len(columns)), np.inf)  # a pair absent at a configuration: nothing there
         d[:, index] = batch.distance
         np.add.at(evaluations, curve, 1)

@@ -103,6 +103,7 @@ class DistanceEngine:
         self.self_names = list(world._self_names)
         self._kinematics = _Kinematics(world)
         self._version = -1
+        self._columns: dict[tuple[int, bool], Any] = {}
         import coal
 
         # penetration depths (the only pairs left to coal) to the engine's own accuracy, not GJK's default 1e-6 m
@@ -142,17 +143,26 @@ class DistanceEngine:
         return self._kinematics(np.asarray(Q, dtype=float), jacobian)
 
     def evaluate(
-        self, Q: np.ndarray, *, jacobian: bool = True, bound_beyond: float = math.inf, obstacles: bool = True
+        self,
+        Q: np.ndarray,
+        *,
+        jacobian: bool = True,
+        bound_beyond: float = math.inf,
+        obstacles: bool = True,
+        jacobian_within: float = math.inf,
     ) -> BatchDistances:
         """All pairs at the configurations ``Q`` (N, nq). Robot–obstacle pairs whose bounding spheres are more than
-        ``bound_beyond`` [m] apart report that gap (a lower bound of their distance) without the exact query."""
+        ``bound_beyond`` [m] apart report that gap (a lower bound of their distance) without the exact query.
+        Jacobian rows are computed only for the pairs at most ``jacobian_within`` [m] apart (the others' rows are
+        zero): a caller that keeps the pairs within a cutoff needs no more, and the rows of all pairs were four
+        fifths of a batch's cost."""
         self._refresh()
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         E, JE = self.segments(Q, jacobian)
         N = len(Q)
-        parts = [self._self_pairs(E, JE)]
+        parts = [self._self_pairs(E, JE, jacobian_within)]
         if obstacles and self.obstacles:
-            parts.append(self._obstacle_pairs(E, JE, bound_beyond))
+            parts.append(self._obstacle_pairs(E, JE, bound_beyond, jacobian_within))
         if obstacles and self.fields:
             parts.append(self._field_pairs(E, JE, bound_beyond))
         d = np.concatenate([p[0] for p in parts], axis=1)
@@ -160,6 +170,17 @@ class DistanceEngine:
         pb = np.concatenate([p[2] for p in parts], axis=1)
         n = np.concatenate([p[3] for p in parts], axis=1)
         J = np.concatenate([p[4] for p in parts], axis=1) if jacobian else None
+        names, travel, owner_a, owner_b = self._pair_columns(obstacles)
+        assert d.shape == (N, len(names))
+        return BatchDistances(names, d, pa, pb, n, J, travel, owner_a, owner_b)
+
+    def _pair_columns(self, obstacles: bool) -> tuple[tuple[tuple[str, str], ...], np.ndarray, np.ndarray, np.ndarray]:
+        """The pairs' names, travel rows and owners, built once per scene version: the same objects every call,
+        so that a caller can map its columns once (the certificates' batches)."""
+        key = (self._version, obstacles)
+        cached = self._columns.get(key)
+        if cached is not None:
+            return cached
         others = self.obstacles + self.fields if obstacles else []
         names = self.self_names + [(self.world.bodies[b].name, o.name) for o in others for b in self.movers]
         reach = self.world._body_reach
@@ -167,10 +188,12 @@ class DistanceEngine:
         travel = np.concatenate([reach[self.self_i] + reach[self.self_j], np.tile(reach[self.movers], (M, 1))])
         owner_a = np.concatenate([self.joint[self.self_i], np.tile(self.joint[self.movers], M)])
         owner_b = np.concatenate([self.joint[self.self_j], np.zeros(M * len(self.movers), dtype=int)])
-        assert d.shape == (N, len(names))
-        return BatchDistances(tuple(names), d, pa, pb, n, J, travel, owner_a, owner_b)
+        for array in (travel, owner_a, owner_b):
+            array.flags.writeable = False  # shared by every batch of this scene version
+        self._columns = {key: (tuple(names), travel, owner_a, owner_b)}
+        return self._columns[key]
 
-    def _self_pairs(self, E: np.ndarray, JE: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    def _self_pairs(self, E: np.ndarray, JE: np.ndarray | None, within: float = math.inf) -> tuple[np.ndarray, ...]:
         i, j = self.self_i, self.self_j
         N, S = len(E), len(i)
         a0, a1 = E[:, i, 0].reshape(-1, 3), E[:, i, 1].reshape(-1, 3)
@@ -185,13 +208,17 @@ class DistanceEngine:
         pa, pb = pa - ri[:, None] * normal, pb + rj[:, None] * normal
         rows = None
         if JE is not None:
-            s2, t2 = s.reshape(N, S), t.reshape(N, S)
-            nn = normal.reshape(N, S, 3)
-            rows = _row(JE[:, i], s2, nn) - _row(JE[:, j], t2, nn)
+            n_, k_ = np.nonzero(d.reshape(N, S) <= within)
+            flat = n_ * S + k_
+            nn = normal[flat]
+            rows = np.zeros((N, S, JE.shape[-1]))
+            rows[n_, k_] = _row(JE[n_, i[k_]], s[flat], nn) - _row(JE[n_, j[k_]], t[flat], nn)
         shape = (N, S)
         return d.reshape(shape), pa.reshape(*shape, 3), pb.reshape(*shape, 3), normal.reshape(*shape, 3), rows
 
-    def _obstacle_pairs(self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float) -> tuple[np.ndarray, ...]:
+    def _obstacle_pairs(
+        self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float, within: float = math.inf
+    ) -> tuple[np.ndarray, ...]:
         """Moving bodies vs obstacles, obstacle-major (N, M, Bm) flattened to (N, M·Bm)."""
         movers = self.movers
         N, M, Bm = len(E), len(self.obstacles), len(movers)
@@ -251,7 +278,9 @@ class DistanceEngine:
             )
         rows = None
         if JE is not None:
-            rows = _row(JE[:, movers][:, None], s, normal)
+            n_, m_, b_ = np.nonzero(d <= within)
+            rows = np.zeros((*shape, JE.shape[-1]))
+            rows[n_, m_, b_] = _row(JE[n_, movers[b_]], s[n_, m_, b_], normal[n_, m_, b_])
         flat = (N, M * Bm)
         return (
             d.reshape(flat),

@@ -387,7 +387,7 @@ class CollisionWorld:
         engine = self.engine()
         if engine is not None:
             # pairs beyond the cutoff are dropped: their lower bounds (no exact query) are enough to drop them
-            batch = engine.evaluate(Q, jacobian=True, bound_beyond=cutoff)
+            batch = engine.evaluate(Q, jacobian=True, jacobian_within=cutoff, bound_beyond=cutoff)
             return [self._from_batch(batch, n, cutoff) for n in range(len(Q))]
         model, data = self.model, self.data
         joints = self._body_joint.tolist()
