@@ -68,3 +68,25 @@ def test_a_straight_plan_reuses_its_segment_certificate_only_on_the_segment(robo
     middle[robot.group("right").indices[1]] += 0.2
     detour = jerk_limited(np.array([starts[k], middle, ends[k]]), robot.planning_limits).trajectory
     assert not _on_certified_segment(world, detour, [starts[k], ends[k]], MARGIN)
+
+
+def test_segment_checks_from_known_distances_are_sound_and_agree(robot, world) -> None:
+    from taplan.planning.verify import KnownDistances
+
+    starts, ends = _segments(robot, world, 12)
+    fractions = np.array([0.0, 0.5, 1.0])
+    configurations = (starts[:, None] + fractions[None, :, None] * (ends - starts)[:, None]).reshape(-1, robot.nq)
+    batch = world.distance_matrix(configurations)  # every pair, exact
+    known = KnownDistances(fractions, batch.pairs, batch.distance.reshape(len(starts), 3, -1), batch.travel)
+    reused = check_segments(world, starts, ends, MARGIN, points=MARGIN / 2, known=known)
+    fresh = check_segments(world, starts, ends, MARGIN, points=MARGIN / 2)
+    assert [c.valid for c in reused] == [c.valid for c in fresh]
+    assert any(c.valid for c in reused) and not all(c.valid for c in reused)
+    # the known first level is not evaluated again: fewer evaluations where a segment is certified
+    assert sum(c.evaluations for c in reused) < sum(c.evaluations for c in fresh)
+    for a, b, got in zip(starts, ends, reused, strict=True):
+        if got.valid:
+            lowest = min(world.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 201))
+            assert lowest >= MARGIN / 2 - 1e-9
+    with pytest.raises(taplan.errors.InvalidInputError, match="known"):
+        check_segments(world, starts[:2], ends[:2], MARGIN, known=known)  # distances of 12 segments for 2

@@ -28,7 +28,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from taplan.errors import InvalidInputError
-from taplan.planning.verify import check_segments
+from taplan.planning.verify import KnownDistances, check_segments
 from taplan.scene.world import CollisionWorld
 
 __all__ = ["optimize_path", "OptimizedPath", "resample"]
@@ -68,43 +68,71 @@ def resample(path: np.ndarray, count: int) -> np.ndarray:
 
 
 class _Problem:
-    """The QP's fixed parts for K waypoints of n active joints."""
+    """The QP's fixed parts for K waypoints of n active joints: the cost ``Σ_k |x_{k+1} − x_k|²`` over the interior
+    waypoints x (ends fixed) is ``½ xᵀ P x + qᵀ x + const`` with ``P = 2 (BᵀB ⊗ I_n)``, ``B`` the (K−1, K−2)
+    difference matrix (``B[k, k] = 1``, ``B[k, k − 1] = −1``). Built with numpy (scipy.sparse's kron and products
+    were 5 ms per problem); the sparse ``P`` only for the sparse solver."""
 
     def __init__(self, start: np.ndarray, goal: np.ndarray, K: int) -> None:
         n = start.size
         self.K, self.n = K, n
         self.N = (K - 2) * n
-        # differences x_{k+1} - x_k as D x + c over the interior waypoints: D = B ⊗ I_n with B[k, k] = 1 and
-        # B[k, k - 1] = -1 (built in one step: a lil_matrix filled block by block cost ~0.1 s per problem)
-        B = sp.eye(K - 1, K - 2, 0) - sp.eye(K - 1, K - 2, -1)
-        D = sp.kron(B, sp.identity(n))
-        c = np.zeros((K - 1) * n)
-        c[:n] -= start
-        c[(K - 2) * n :] += goal
-        self.D = D.tocsr()
-        self.c = c
-        self.P = (2.0 * self.D.T @ self.D).tocsc()
-        self.q = 2.0 * self.D.T @ c
+        self.start, self.goal = start, goal
+        B = np.eye(K - 1, K - 2) - np.eye(K - 1, K - 2, -1)
+        self.BtB = B.T @ B
+        c = np.zeros((K - 1, n))  # the differences' constant part: -start first, +goal last
+        c[0] -= start
+        c[K - 2] += goal
+        self.q = 2.0 * (B.T @ c).ravel()
+        self._P_dense: np.ndarray | None = None
+        self._P_sparse: sp.csc_matrix | None = None
+
+    @property
+    def P_dense(self) -> np.ndarray:
+        """``P`` as a dense array (the dense solvers' form), made once."""
+        if self._P_dense is None:
+            self._P_dense = 2.0 * np.kron(self.BtB, np.eye(self.n))
+        return self._P_dense
+
+    @property
+    def P(self) -> sp.csc_matrix:
+        """``P`` as a sparse matrix (the sparse solvers' form), made once."""
+        if self._P_sparse is None:
+            self._P_sparse = (2.0 * sp.kron(sp.csr_matrix(self.BtB), sp.identity(self.n))).tocsc()
+        return self._P_sparse
 
     def cost(self, x: np.ndarray) -> float:
-        r = self.D @ x + self.c
-        return float(r @ r)
+        path = np.vstack([self.start, x.reshape(self.K - 2, self.n), self.goal])
+        return float(np.square(np.diff(path, axis=0)).sum())
 
 
 def _evaluate(
     world: CollisionWorld, full: np.ndarray, path: np.ndarray, active: np.ndarray, cutoff: float
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per evaluation point (waypoints 1..K-2, then the K-1 midpoints): (distances, Jacobian rows over active)."""
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], KnownDistances | None]:
+    """Per evaluation point (waypoints 1..K-2, then the K-1 midpoints): (distances, Jacobian rows over active) of
+    the pairs within ``cutoff`` that the active joints move; and, from the engine, every pair's exact distance at
+    each segment's start, middle and end (the certificate's first level, :func:`check_segments`' ``known``)."""
     K = len(path)
-    points = np.concatenate([path[1 : K - 1], (path[:-1] + path[1:]) / 2])
+    # the ends too (the certificate starts there); the middles as the certificate computes its fractions
+    points = np.concatenate([path, path[:-1] + 0.5 * (path[1:] - path[:-1])])
     configurations = np.repeat(full[None, :], len(points), axis=0)
     configurations[:, active] = points
-    out = []
-    for d in world.distances_many(configurations, cutoff=cutoff):
+    batch = world.jacobian_batch(configurations, cutoff=cutoff)
+    if batch is not None:  # the engine's arrays: the same pairs and rows as distances_many, without its objects
+        assert batch.jacobian is not None
+        movable = batch.travel[:, active].any(axis=1)  # pairs the moving joints cannot change stay as they are
+        near = (batch.distance <= cutoff) & np.isfinite(batch.distance) & movable
+        order = list(range(1, K - 1)) + list(range(K, 2 * K - 1))
+        rows = [(batch.distance[n, near[n]], batch.jacobian[n, near[n]][:, active]) for n in order]
+        k = np.arange(K - 1)
+        along = np.stack([batch.distance[k], batch.distance[K + k], batch.distance[k + 1]], axis=1)  # (K-1, 3, P)
+        return rows, KnownDistances(np.array([0.0, 0.5, 1.0]), batch.pairs, along, batch.travel)
+    rows = []
+    for d in world.distances_many(configurations[np.r_[1 : K - 1, K : 2 * K - 1]], cutoff=cutoff):
         assert d.jacobian is not None and d.travel is not None
-        movable = d.travel[:, active].any(axis=1)  # pairs the moving joints cannot change stay as they are
-        out.append((d.distance[movable], d.jacobian[movable][:, active]))
-    return out
+        movable = d.travel[:, active].any(axis=1)
+        rows.append((d.distance[movable], d.jacobian[movable][:, active]))
+    return rows, None
 
 
 def _lowest(evaluations: list[tuple[np.ndarray, np.ndarray]]) -> float:
@@ -153,7 +181,7 @@ def optimize_path(
     x_path = resample(seed, int(np.clip(np.ceil(length / SEGMENT_STEP) + 1, 5, 40)))
     iterations = 0
     for _ in range(REFINEMENTS + 1):
-        optimized, used = _sequential_convex(
+        optimized, used, known = _sequential_convex(
             world, full, x_path, active, lower, upper, margin, max_iterations - iterations, deadline, solver
         )
         iterations += used
@@ -165,8 +193,15 @@ def optimize_path(
         if time.perf_counter() >= deadline:
             return None  # the certificate would end after the deadline
         # every segment in one batch: each level of halving is one batched distance evaluation
+        # (its first level: the distances of the last iteration's evaluation of this path, no new evaluation)
         checks = check_segments(
-            world, configurations[:-1], configurations[1:], margin, points=POINTS * margin, deadline=deadline
+            world,
+            configurations[:-1],
+            configurations[1:],
+            margin,
+            points=POINTS * margin,
+            deadline=deadline,
+            known=known,
         )
         if time.perf_counter() >= deadline:
             return None
@@ -198,8 +233,9 @@ def _sequential_convex(
     max_iterations: int,
     deadline: float,
     solver: str,
-) -> tuple[np.ndarray | None, int]:
-    """The SCP iterations from ``x_path`` (K, n active): (optimised path or None when still colliding, QPs)."""
+) -> tuple[np.ndarray | None, int, KnownDistances | None]:
+    """The SCP iterations from ``x_path`` (K, n active): (optimised path or None when still colliding, QPs, every
+    pair's distances along the path's segments from its last evaluation, when the engine made it)."""
     K = len(x_path)
     problem = _Problem(x_path[0], x_path[-1], K)
     inset = np.minimum(LIMIT_INSET, (upper[active] - lower[active]) / 4)
@@ -209,21 +245,25 @@ def _sequential_convex(
     cutoff = target + ACTIVATION
     trust, mu = 0.2, 10.0
     x = x_path[1:-1].ravel()
-    evaluations = _evaluate(world, full, x_path, active, cutoff)
+    evaluations, known = _evaluate(world, full, x_path, active, cutoff)
     merit = problem.cost(x) + mu * _violation(evaluations, target)
     iterations = 0
     longest = 0.0  # [s] the longest iteration so far: another starts only if that much is left before the deadline
     while iterations < max_iterations and time.perf_counter() + longest < deadline:
         iterations += 1
         begin = time.perf_counter()
-        G, h = _linearised(problem, evaluations, x, target)
-        m = G.shape[0]
-        P = sp.block_diag([problem.P, sp.identity(m) * 1e-6]).tocsc()
+        G_x, h = _linearised(problem, evaluations, x, target)
+        m = G_x.shape[0]
         q = np.concatenate([problem.q, np.full(m, mu)])
-        G = sp.hstack([G, -sp.identity(m)]).tocsc() if m else sp.csc_matrix((0, problem.N + m))
         backend = solver if solver != "auto" else ("daqp" if problem.N + m <= LARGE_QP else "osqp")
         if backend in DENSE_SOLVERS:
-            P, G = P.toarray(), G.toarray()
+            P = np.zeros((problem.N + m, problem.N + m))
+            P[: problem.N, : problem.N] = problem.P_dense
+            P[problem.N :, problem.N :] = 1e-6 * np.eye(m)
+            G = np.hstack([G_x, -np.eye(m)])
+        else:
+            P = sp.block_diag([problem.P, sp.identity(m) * 1e-6]).tocsc()
+            G = sp.hstack([sp.csr_matrix(G_x), -sp.identity(m)]).tocsc() if m else sp.csc_matrix((0, problem.N))
         # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
         lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(m)])
         ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(m, np.inf)])
@@ -245,12 +285,12 @@ def _sequential_convex(
         x_new, slack = z[: problem.N], z[problem.N :]
         predicted = merit - (problem.cost(x_new) + mu * float(np.maximum(slack, 0.0).sum()))
         candidate = np.vstack([x_path[0], x_new.reshape(K - 2, -1), x_path[-1]])
-        new_evaluations = _evaluate(world, full, candidate, active, cutoff)
+        new_evaluations, new_known = _evaluate(world, full, candidate, active, cutoff)
         new_merit = problem.cost(x_new) + mu * _violation(new_evaluations, target)
         longest = max(longest, time.perf_counter() - begin)
         if merit - new_merit >= 0.1 * max(predicted, 0.0) and new_merit < merit:
             improvement = merit - new_merit
-            x, evaluations, merit, x_path = x_new, new_evaluations, new_merit, candidate
+            x, evaluations, merit, x_path, known = x_new, new_evaluations, new_merit, candidate, new_known
             trust = min(trust * 1.5, 0.5)
             if _lowest(evaluations) >= margin and improvement < 1e-3 * max(merit, 1e-9):
                 break
@@ -264,36 +304,35 @@ def _sequential_convex(
                 merit = problem.cost(x) + mu * _violation(evaluations, target)
                 if mu > 1e4:
                     break
-    return (x_path if _lowest(evaluations) >= margin else None), iterations
+    return (x_path if _lowest(evaluations) >= margin else None), iterations, known
 
 
 def _linearised(
     problem: _Problem, evaluations: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray, target: float
-) -> tuple[sp.csr_matrix, np.ndarray]:
-    """Rows ``-J Δx - t ≤ d - target`` (without the slack column) as ``G x ≤ h``."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``-J Δx - t ≤ d - target`` (without the slack column) as ``G x ≤ h``, G dense (m, N): a few hundred
+    columns at most, and daqp takes dense matrices (building them through scipy.sparse cost more than the QP)."""
     K, n = problem.K, problem.n
-    rows: list[np.ndarray] = []
-    cols: list[np.ndarray] = []
-    vals: list[np.ndarray] = []
-    h: list[np.ndarray] = []
+    keeps = [np.any(J != 0.0, axis=1) for _, J in evaluations]  # pairs the moving joints cannot change: no row
+    m = sum(int(np.count_nonzero(keep)) for keep in keeps)
+    G = np.zeros((m, problem.N))
+    h = np.empty(m)
+    X = x.reshape(K - 2, n)
     r = 0
-    for e, (d, J) in enumerate(evaluations):
+    for e, ((d, J), keep) in enumerate(zip(evaluations, keeps, strict=True)):
+        Jk = J[keep]
+        rows = len(Jk)
+        if not rows:
+            continue
         if e < K - 2:
             blocks = [(e, 1.0)]  # waypoint e + 1 is variable block e
         else:
             k = e - (K - 2)  # midpoint of waypoints k, k + 1
             blocks = [(b - 1, 0.5) for b in (k, k + 1) if 1 <= b <= K - 2]
-        keep = np.any(J != 0.0, axis=1)  # pairs the moving joints cannot change give no row
-        Jk, m = J[keep], int(np.count_nonzero(keep))
-        jx = np.zeros(m)
+        jx = np.zeros(rows)
         for block, weight in blocks:
-            columns = np.arange(block * n, (block + 1) * n)
-            rows.append(np.repeat(np.arange(r, r + m), n))
-            cols.append(np.tile(columns, m))
-            vals.append((-weight * Jk).ravel())
-            jx += weight * (Jk @ x[columns])
-        h.append(d[keep] - target - jx)
-        r += m
-    row, col, val = (np.concatenate(v) if v else np.zeros(0) for v in (rows, cols, vals))
-    G = sp.csr_matrix((val, (row, col)), shape=(r, problem.N))
-    return G, np.concatenate(h) if h else np.zeros(0)
+            G[r : r + rows, block * n : (block + 1) * n] = -weight * Jk
+            jx += weight * (Jk @ X[block])
+        h[r : r + rows] = d[keep] - target - jx
+        r += rows
+    return G, h

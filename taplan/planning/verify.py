@@ -40,6 +40,18 @@ INITIAL_INTERVALS = 4  # a segment's first batch: its ends and this many interva
 
 
 @dataclass(frozen=True)
+class KnownDistances:
+    """Distances already evaluated along S segments, for :func:`check_segments`: at the ``fractions`` (G,) of every
+    segment (0 first, 1 last, increasing), ``distance`` (S, G, P) of every pair ``pairs`` (exact or lower bounds)
+    with their ``travel`` rows (P, nv) (:class:`~taplan.scene.engine.BatchDistances`)."""
+
+    fractions: np.ndarray
+    pairs: tuple[tuple[str, str], ...]
+    distance: np.ndarray
+    travel: np.ndarray
+
+
+@dataclass(frozen=True)
 class SegmentCheck:
     """Outcome of a segment check: ``valid``, the smallest clearance seen [m] and where (fraction in [0, 1])."""
 
@@ -70,10 +82,14 @@ def check_segments(
     *,
     points: float | None = None,
     deadline: float = math.inf,
+    known: KnownDistances | None = None,
 ) -> list[SegmentCheck]:
     """:func:`check_segment` for S segments ``starts[k] → ends[k]`` ((S, nq) each) in one batch: every level of
     halving evaluates the middles of all the intervals not yet certified, of every segment, in one call. A segment
-    stops at its first evaluation closer than ``points``. Past ``deadline`` the unfinished segments are invalid."""
+    stops at its first evaluation closer than ``points``. Past ``deadline`` the unfinished segments are invalid.
+
+    ``known``: distances of every pair already evaluated at the same fractions of every segment (the optimiser's
+    waypoints and midpoints); they are the first level instead of the default grid, which costs no evaluation."""
     if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not (0 <= margin < math.inf):
         raise InvalidInputError("margin", margin, "a clearance >= 0 [m]")
     if points is not None and not (isinstance(points, (int, float)) and 0 <= points < math.inf):
@@ -91,10 +107,24 @@ def check_segments(
     def configurations(segment: np.ndarray, s: np.ndarray) -> np.ndarray:
         return starts[segment] + s[:, None] * delta[segment]
 
+    if known is not None:
+        fractions = np.asarray(known.fractions, dtype=float)
+        if (
+            known.distance.shape[:2] != (len(starts), len(fractions))
+            or fractions[0] != 0.0
+            or fractions[-1] != 1.0
+            or np.any(np.diff(fractions) <= 0.0)
+        ):
+            raise InvalidInputError(
+                "known", f"distances {known.distance.shape} at fractions {fractions.tolist()}", "(S, G, P) at 0..1"
+            )
+        grid = fractions
+    grids = [grid if moving[k] or known is not None else grid[:1] for k in range(len(starts))]
+    curves = np.concatenate(grids)
     outcome = _certify_batch(
         world,
         len(starts),
-        [grid if moving[k] else grid[:1] for k in range(len(starts))],
+        grids,
         configurations,
         lambda segment, a, b, travel: step[segment] @ travel.T,
         floor,
@@ -102,6 +132,7 @@ def check_segments(
         MIN_FRACTION,
         deadline,
         strict=False,
+        known=None if known is None else (known.pairs, known.distance.reshape(len(curves), -1), known.travel),
     )
     return [SegmentCheck(valid, low, pair, count) for valid, low, pair, _, count in outcome]
 
@@ -118,6 +149,7 @@ def _certify_batch(
     deadline: float,
     *,
     strict: bool,
+    known: tuple[tuple[tuple[str, str], ...], np.ndarray, np.ndarray] | None = None,
 ) -> list[tuple[bool, float, tuple[str, str], float, int]]:
     """Certify ``count`` curves (segments, trajectories) at once: per curve the intervals between consecutive
     parameters of its grid, halved level by level until every pair's two-sided bound
@@ -125,7 +157,9 @@ def _certify_batch(
     s)`` gives the configurations at parameters ``s`` of the curves ``curve`` (arrays), ``rate(curve, a, b,
     travel)`` each interval's per-pair rate (I, P) from the pairs' travel rows (P, nv). A curve fails at an
     evaluation closer than ``required``, an interval shorter than ``shortest`` that still does not clear, or the
-    ``deadline``. Returns per curve (valid, lowest evaluated clearance, its pair, its parameter, evaluations)."""
+    ``deadline``. ``known`` (pairs, distances (len of the grids together, P), travel rows (P, nv)): the distances
+    at the grids, evaluated already (exact, every pair); not evaluated again. Returns per curve (valid, lowest
+    evaluated clearance, its pair, its parameter, evaluations)."""
     lowest = np.full(count, np.inf)
     where = np.zeros(count)
     pair: list[tuple[str, str]] = [("", "")] * count
@@ -135,34 +169,46 @@ def _certify_batch(
     travel = np.zeros((0, world.model.nv))
     mapped: list[tuple[tuple[tuple[str, str], ...], np.ndarray]] = []  # the engine's pair names, their columns
 
-    def evaluate(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Distances (len(s), P) at the parameters; records the lowest per curve and fails curves below required."""
+    def record(
+        curve: np.ndarray,
+        s: np.ndarray,
+        pairs: tuple[tuple[str, str], ...],
+        distance: np.ndarray,
+        rows: np.ndarray,
+        count: bool = True,
+    ) -> np.ndarray:
+        """Distances (len(s), P) of evaluated ``pairs`` (their travel ``rows``) at the parameters; records the
+        lowest per curve and fails curves below required."""
         nonlocal travel
-        batch = world.distance_matrix(configurations(curve, s), bound_beyond=BOUND_BEYOND)
-        if mapped and mapped[0][0] is batch.pairs:  # the engine hands the same names every call: map them once
+        if mapped and mapped[0][0] is pairs:  # the engine hands the same names every call: map them once
             index = mapped[0][1]
         else:
-            index = np.array([columns.setdefault(p, len(columns)) for p in batch.pairs], dtype=int)
-            mapped[:] = [(batch.pairs, index)]
+            index = np.array([columns.setdefault(p, len(columns)) for p in pairs], dtype=int)
+            mapped[:] = [(pairs, index)]
             if len(columns) > len(travel):
                 travel = np.vstack([travel, np.zeros((len(columns) - len(travel), travel.shape[1]))])
-            travel[index] = batch.travel
+            travel[index] = rows
         d = np.full((len(s), len(columns)), np.inf)  # a pair absent at a configuration: nothing there
-        d[:, index] = batch.distance
-        np.add.at(evaluations, curve, 1)
+        d[:, index] = distance
+        if count:
+            np.add.at(evaluations, curve, 1)
         if d.shape[1]:
             k = np.argmin(d, axis=1)
             low = d[np.arange(len(s)), k]
             for row in np.flatnonzero(low < lowest[curve]):
                 c = curve[row]
                 if low[row] < lowest[c]:
-                    lowest[c], where[c], pair[c] = low[row], s[row], batch.pairs[np.flatnonzero(index == k[row])[0]]
+                    lowest[c], where[c], pair[c] = low[row], s[row], pairs[np.flatnonzero(index == k[row])[0]]
             valid[curve[low < required]] = False
         return d
 
+    def evaluate(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
+        batch = world.distance_matrix(configurations(curve, s), bound_beyond=BOUND_BEYOND)
+        return record(curve, s, batch.pairs, batch.distance, batch.travel)
+
     curve = np.concatenate([np.full(len(g), k) for k, g in enumerate(grids)])
     s = np.concatenate(grids)
-    d = evaluate(curve, s)
+    d = evaluate(curve, s) if known is None else record(curve, s, *known, count=False)
     # the intervals between consecutive grid points of the same curve
     same = curve[:-1] == curve[1:]
     i_curve, a, b = curve[:-1][same], s[:-1][same], s[1:][same]

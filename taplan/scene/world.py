@@ -384,10 +384,8 @@ class CollisionWorld:
         self._refresh()
         if self._attached_items() or not np.all(np.isfinite(Q)):
             return [self.distances(q, cutoff=cutoff) for q in Q]
-        engine = self.engine()
-        if engine is not None:
-            # pairs beyond the cutoff are dropped: their lower bounds (no exact query) are enough to drop them
-            batch = engine.evaluate(Q, jacobian=True, jacobian_within=cutoff, bound_beyond=cutoff)
+        batch = self.jacobian_batch(Q, cutoff=cutoff)
+        if batch is not None:
             return [self._from_batch(batch, n, cutoff) for n in range(len(Q))]
         model, data = self.model, self.data
         joints = self._body_joint.tolist()
@@ -411,6 +409,20 @@ class CollisionWorld:
         for n in range(N) if self._fields else ():
             parts[n] += self._field_distances(starts[n], ends[n], cutoff, math.inf)
         return [self._joined(parts[n], jacobians[n]) for n in range(N)]
+
+    def jacobian_batch(self, configurations: npt.ArrayLike, *, cutoff: float) -> Any:
+        """The engine's :class:`~taplan.scene.engine.BatchDistances` at N configurations (N, nq) with the Jacobian
+        rows of the pairs within ``cutoff`` [m] (the other rows zero): :meth:`distances_many` as arrays, without a
+        :class:`Distances` per configuration. None where :meth:`distances_many` goes one configuration at a time
+        (no engine, attached objects, non-finite configurations)."""
+        Q = np.asarray(configurations, dtype=float)
+        if Q.ndim != 2 or Q.shape[1] != self.model.nq:
+            raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
+        self._refresh()
+        engine = self.engine()
+        if engine is None or self._attached_items() or not np.all(np.isfinite(Q)):
+            return None
+        return engine.evaluate(Q, jacobian=True, jacobian_within=cutoff)
 
     def engine(self) -> Any:
         """The batched distance engine for the current scene (:class:`~taplan.scene.engine.DistanceEngine`), or

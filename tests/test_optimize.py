@@ -1,0 +1,93 @@
+"""taplan.planning.optimize's cheaper internals give the same numbers: the QP's cost matrices (numpy) equal the
+sparse formulation, the engine's array route of the evaluations equals the per-configuration route, and the path
+certified from the last evaluation's distances is the same path, really at half the margin."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import taplan
+from taplan.planning import check_segment
+from taplan.planning import optimize as optimize_module
+from taplan.planning.optimize import _evaluate, _Problem, optimize_path
+from taplan.scene import Box, CollisionWorld, Scene
+
+MARGIN = 0.01  # [m]
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+@pytest.fixture(scope="module")
+def world(robot) -> CollisionWorld:
+    scene = Scene()
+    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.45], [0, 0, 0, 1]))
+    scene.add("panel", Box((0.5, 0.02, 0.45)), ([0.5, 0.0, -0.2], [0, 0, 0, 1]))
+    return CollisionWorld(robot, scene)
+
+
+def _blocked(robot: taplan.Robot, world: CollisionWorld) -> tuple[np.ndarray, np.ndarray]:
+    """A left-arm start and goal on either side of the panel whose straight segment is blocked (seeded)."""
+    rng = np.random.default_rng(3)
+    limits = robot.planning_limits
+    idx = robot.group("left").indices
+    for _ in range(2000):
+        a, b = robot.home.copy(), robot.home.copy()
+        a[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
+        b[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
+        free = world.min_distance(a)[0] > 0.015 and world.min_distance(b)[0] > 0.015
+        if free and not check_segment(world, a, b, MARGIN).valid:
+            return a, b
+    raise AssertionError("no blocked problem found")
+
+
+@pytest.mark.parametrize(("K", "n"), [(3, 7), (6, 7), (12, 14)])
+def test_qp_cost_equals_the_sparse_difference_formulation(K: int, n: int) -> None:
+    rng = np.random.default_rng(K)
+    start, goal = rng.normal(size=n), rng.normal(size=n)
+    problem = _Problem(start, goal, K)
+    B = sp.eye(K - 1, K - 2, 0) - sp.eye(K - 1, K - 2, -1)
+    D = sp.kron(B, sp.identity(n)).tocsr()
+    c = np.zeros((K - 1) * n)
+    c[:n], c[(K - 2) * n :] = -start, goal
+    np.testing.assert_allclose(problem.P_dense, (2 * D.T @ D).toarray(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(problem.P.toarray(), (2 * D.T @ D).toarray(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(problem.q, 2 * D.T @ c, rtol=0, atol=1e-14)
+    x = rng.normal(size=(K - 2) * n)
+    r = D @ x + c
+    assert problem.cost(x) == pytest.approx(float(r @ r), rel=1e-12)  # [rad²]
+
+
+def test_engine_evaluations_equal_the_per_configuration_ones(robot, world, monkeypatch) -> None:
+    start, goal = _blocked(robot, world)
+    active = robot.group("left").indices
+    path = np.linspace(start[active], goal[active], 9)
+    fast, known = _evaluate(world, start, path, active, 0.06)
+    assert known is not None and known.distance.shape[:2] == (8, 3)
+    monkeypatch.setattr(world, "jacobian_batch", lambda *args, **kwargs: None)
+    slow, none = _evaluate(world, start, path, active, 0.06)
+    assert none is None and len(fast) == len(slow) == 7 + 8  # interior waypoints, then the midpoints
+    assert sum(len(d) for d, _ in fast) > 0  # pairs within the cutoff exist
+    for (d_fast, J_fast), (d_slow, J_slow) in zip(fast, slow, strict=True):  # (a batch of 17 vs 15: rounding)
+        np.testing.assert_allclose(d_fast, d_slow, rtol=0, atol=1e-12)  # [m]
+        np.testing.assert_allclose(J_fast, J_slow, rtol=0, atol=1e-12)  # [m/rad]
+
+
+def test_the_certificate_from_the_last_evaluation_gives_the_same_certified_path(robot, world, monkeypatch) -> None:
+    start, goal = _blocked(robot, world)
+    active = robot.group("left").indices
+    limits = robot.planning_limits
+    reused = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    assert reused is not None
+    original = optimize_module._evaluate
+    monkeypatch.setattr(optimize_module, "_evaluate", lambda *args: (original(*args)[0], None))
+    fresh = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    assert fresh is not None
+    np.testing.assert_array_equal(reused.path, fresh.path)
+    for a, b in zip(reused.path[:-1], reused.path[1:], strict=True):  # half the margin along every segment [m]
+        lowest = min(world.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 101))
+        assert lowest >= MARGIN / 2 - 1e-9
