@@ -156,6 +156,53 @@ def test_attached_objects_go_through_the_world(robot: taplan.Robot) -> None:
     assert np.all(bounded.distance <= matrix.distance + 1e-12)  # the attached pairs' gaps are lower bounds too
 
 
+def _attached_pairs_one_by_one(world: CollisionWorld, q: np.ndarray, bound_beyond: float) -> dict:
+    """The attached object's pairs queried one at a time (coal for every pair within ``bound_beyond`` of its
+    bounding sphere, else the spheres' gap), at ``q``: {pair: distance}."""
+    import pinocchio as pin
+
+    pin.forwardKinematics(world.model, world.data, q)
+    pin.updateFramePlacements(world.model, world.data)
+    [att] = world._attached_items()
+    T = world.data.oMf[att.frame].homogeneous @ att.pose
+    transform, center = world._coal.Transform3s(T[:3, :3], T[:3, 3]), T[:3, 3]
+    out = {}
+    for item in world._items:
+        gap = np.inf if item.halfspace else np.linalg.norm(center - item.center) - item.radius - att.radius
+        exact = gap <= bound_beyond or item.halfspace
+        if exact:
+            gap = world._pair(item.geometry, item.transform, att.geometry, transform)[0]
+        out[(att.name, item.name)] = gap
+    for k, body in enumerate(world.bodies):
+        if body.name in att.touch:
+            continue
+        a = world.data.oMi[body.joint].rotation @ body.start + world.data.oMi[body.joint].translation
+        b = world.data.oMi[body.joint].rotation @ body.end + world.data.oMi[body.joint].translation
+        gap = np.linalg.norm(center - (a + b) / 2) - body.radius - np.linalg.norm(b - a) / 2 - att.radius
+        if gap <= bound_beyond:
+            gap = world._pair(world._body_geometry[k][0], world._body_transform(k), att.geometry, transform)[0]
+        out[(att.name, body.name)] = gap
+    return out
+
+
+@pytest.mark.parametrize("bound_beyond", [np.inf, 0.05])
+def test_attached_pairs_equal_one_by_one_queries(robot: taplan.Robot, bound_beyond: float) -> None:
+    scene = _scene(1)
+    scene.attach("tool", Box((0.05, 0.04, 0.12)), "right_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    Q = _configurations(robot, 4, 11)
+    matrix = world.distance_matrix(Q, bound_beyond=bound_beyond)
+    column = {pair: k for k, pair in enumerate(matrix.pairs)}
+    bounded = 0
+    for n, q in enumerate(Q):
+        reference = _attached_pairs_one_by_one(world, q, bound_beyond)
+        assert set(reference) == {pair for pair in matrix.pairs if pair[0] == "tool"}
+        for pair, d in reference.items():
+            assert matrix.distance[n, column[pair]] == pytest.approx(d, abs=1e-12)  # [m]
+        bounded += sum(np.isfinite(bound_beyond) and d > bound_beyond for d in reference.values())
+    assert bounded > 0 or not np.isfinite(bound_beyond)  # the sphere bounds were used
+
+
 def test_segment_box_and_cylinder_against_dense_sampling() -> None:
     rng = np.random.default_rng(5)
     M = 200

@@ -180,7 +180,7 @@ def _certify_batch(
         """Distances (len(s), P) of evaluated ``pairs`` (their travel ``rows``) at the parameters; records the
         lowest per curve and fails curves below required."""
         nonlocal travel
-        if mapped and mapped[0][0] is pairs:  # the engine hands the same names every call: map them once
+        if mapped and (mapped[0][0] is pairs or mapped[0][0] == pairs):  # the same names: map them once
             index = mapped[0][1]
         else:
             index = np.array([columns.setdefault(p, len(columns)) for p in pairs], dtype=int)

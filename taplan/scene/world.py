@@ -99,6 +99,10 @@ class _PairList:
     def add(self, name: tuple[str, str], d: float, pa: Any, pb: Any, n: Any, a: int, b: int, travel: Any) -> None:
         self.rows.append((name, d, pa, pb, n, a, b, travel))
 
+    def add_rows(self, names: list[tuple[str, str]], *columns: np.ndarray) -> None:
+        """Several pairs at once: ``names`` and the columns of :meth:`add` as arrays (one row per pair)."""
+        self.rows.extend(zip(names, *columns, strict=True))
+
     def freeze(self) -> _Pairs:
         count = len(self.rows)
         column: list[Any] = list(zip(*self.rows, strict=True)) if count else [[] for _ in range(8)]
@@ -772,34 +776,58 @@ class CollisionWorld:
             T = data.oMf[att.frame].homogeneous @ att.pose
             att.transform = self._coal.Transform3s(T[:3, :3], T[:3, 3])
             att.center = T[:3, 3]
-        transforms = self._body_transforms()
+        # the bodies' bounding spheres at once; a body's coal transform only for an exact query (per configuration,
+        # the 27 transforms and the scalar norms of the bounds were most of an attached scene's distance query)
+        centers = (starts + ends) / 2
+        radii = self._radius + np.linalg.norm(ends - starts, axis=1) / 2
+        transforms: dict[int, Any] = {}
         out = _PairList(self.model.nv)
         for att in self._attached_items():
             parent = self.model.frames[att.frame].parentJoint
-            others = [
-                (item.name, item.geometry, item.transform, item.center, item.radius, 0, item.halfspace, None)
-                for item in self._items
-            ]
-            for k, b in enumerate(self.bodies):
-                if b.name in att.touch:
-                    continue
-                center = (starts[k] + ends[k]) / 2
-                radius = b.radius + float(np.linalg.norm(ends[k] - starts[k])) / 2
-                geometry = self._body_geometry[k][0]
-                others.append((b.name, geometry, transforms[k], center, radius, b.joint, False, self._body_reach[k]))
-            for name, geometry, transform, center, radius, joint, halfspace, row in others:
-                gap = math.inf if halfspace else float(np.linalg.norm(center - att.center) - radius - att.radius)
+            away = att.center - centers  # from each body's centre toward the object's [m]
+            apart = np.linalg.norm(away, axis=1)
+            unit = away / np.maximum(apart, 1e-12)[:, None]
+            body_gaps = apart - radii - att.radius
+            for item in self._items:
+                between = math.inf if item.halfspace else float(np.linalg.norm(att.center - item.center))
+                gap = between - item.radius - att.radius
                 if gap > cutoff:
                     continue
                 if bound_beyond < gap < math.inf:
-                    away = att.center - center
-                    n = away / max(float(np.linalg.norm(away)), 1e-12)
-                    pa, pb, d = att.center - att.radius * n, center + radius * n, gap
+                    n = (att.center - item.center) / max(between, 1e-12)
+                    pa, pb, d = att.center - att.radius * n, item.center + item.radius * n, gap
                 else:
-                    d, pa, pb, n = self._pair(geometry, transform, att.geometry, att.transform)
-                if d > cutoff:
+                    d, pa, pb, n = self._pair(item.geometry, item.transform, att.geometry, att.transform)
+                if d <= cutoff:
+                    out.add((att.name, item.name), d, pa, pb, n, parent, 0, att.reach)
+            # the bodies: bounds for all at once, coal where the bound is not enough, in body order
+            listed = np.array([b.name not in att.touch for b in self.bodies]) & (body_gaps <= cutoff)
+            k_all = np.flatnonzero(listed)
+            d_all = body_gaps[k_all].copy()
+            n_all = unit[k_all].copy()
+            pa_all = att.center - att.radius * n_all
+            pb_all = centers[k_all] + radii[k_all, None] * n_all
+            for row, k in enumerate(k_all.tolist()):
+                if bound_beyond < d_all[row]:
                     continue
-                out.add((att.name, name), d, pa, pb, n, parent, joint, att.reach if row is None else att.reach + row)
+                if k not in transforms:
+                    transforms[k] = self._body_transform(k)
+                geometry = self._body_geometry[k][0]
+                d_all[row], pa_all[row], pb_all[row], n_all[row] = self._pair(
+                    geometry, transforms[k], att.geometry, att.transform
+                )
+            keep = d_all <= cutoff
+            k_all = k_all[keep]
+            out.add_rows(
+                [(att.name, self.bodies[k].name) for k in k_all.tolist()],
+                d_all[keep],
+                pa_all[keep],
+                pb_all[keep],
+                n_all[keep],
+                np.full(len(k_all), parent),
+                self._body_joint[k_all],
+                att.reach + self._body_reach[k_all],
+            )
             for o in self._fields:  # against the object's bounding sphere: a lower bound of its distance
                 R, t = o.pose[:3, :3], o.pose[:3, 3]
                 centre = ((att.center - t) @ R)[None]
