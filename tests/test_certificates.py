@@ -90,3 +90,30 @@ def test_segment_checks_from_known_distances_are_sound_and_agree(robot, world) -
             assert lowest >= MARGIN / 2 - 1e-9
     with pytest.raises(taplan.errors.InvalidInputError, match="known"):
         check_segments(world, starts[:2], ends[:2], MARGIN, known=known)  # distances of 12 segments for 2
+
+
+def test_an_uncertified_interval_is_split_into_the_pieces_its_closest_pair_needs() -> None:
+    from taplan.planning.verify import MAX_PIECES, _split
+
+    a, b = np.array([0.0, 0.0, 0.5]), np.array([1.0, 1.0, 0.75])
+    d_a = np.array([[0.02, 1.0], [0.0102, 1.0], [0.02, 1.0]])  # [m], two pairs
+    d_b = np.array([[0.02, 1.0], [0.0102, 1.0], [0.02, 1.0]])
+    rate = np.array([[0.06, 0.0], [1.0, 0.0], [0.001, 0.0]])  # [m per unit of the parameter]
+    seen = []
+
+    def evaluate(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
+        seen.append(s.copy())
+        return np.column_stack([0.02 + s, np.ones_like(s)])
+
+    curve, lo, hi, d_lo, d_hi = _split(np.array([0, 1, 2]), a, b, d_a, d_b, rate, 0.005, evaluate, 2)
+    counts = [int(np.sum(curve == k)) for k in range(3)]
+    # pieces = ceil(1.25 * rate * length / (2 * (mean - floor))): 0.06 / 0.03 -> 3; 1.0 / 0.0104 -> capped; halving
+    assert counts == [3, MAX_PIECES, 2]
+    for k in range(3):  # contiguous pieces from a to b, the distances at their ends those evaluated there
+        pieces = np.flatnonzero(curve == k)
+        assert lo[pieces[0]] == a[k] and hi[pieces[-1]] == b[k]
+        np.testing.assert_array_equal(hi[pieces[:-1]], lo[pieces[1:]])
+        np.testing.assert_allclose(np.diff(np.append(lo[pieces], b[k])), (b[k] - a[k]) / counts[k], atol=1e-15)
+        inner = pieces[1:]
+        np.testing.assert_allclose(d_lo[inner, 0], 0.02 + lo[inner], atol=1e-15)
+    assert len(seen) == 1  # every new point in one evaluation

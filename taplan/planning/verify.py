@@ -37,6 +37,9 @@ MIN_FRACTION = 1e-9  # a segment interval this short that still cannot be certif
 MIN_INTERVAL = 1e-6  # [s] a trajectory interval this short that still cannot be certified is a failure
 BOUND_BEYOND = 0.1  # [m] pairs whose bounding spheres are farther apart use that gap (a lower bound): no coal query
 INITIAL_INTERVALS = 4  # a segment's first batch: its ends and this many intervals between them
+# an uncertified interval is split into the pieces its worst pair needs by the mean of its ends' distances (this
+# factor more, so that one level usually suffices), at least 2 (halving) and at most MAX_PIECES
+SPLIT_SAFETY, MAX_PIECES = 1.25, 8
 
 
 @dataclass(frozen=True)
@@ -223,22 +226,60 @@ def _certify_batch(
             break
         P = len(columns)
         d_a, d_b = _pad(d_a, P), _pad(d_b, P)
-        lower = (d_a + d_b - rate(i_curve, a, b, travel) * (b - a)[:, None]) / 2
+        r = rate(i_curve, a, b, travel)
+        lower = (d_a + d_b - r * (b - a)[:, None]) / 2
         clear = np.all(lower > floor if strict else lower >= floor, axis=1)
-        i_curve, a, b, d_a, d_b = i_curve[~clear], a[~clear], b[~clear], d_a[~clear], d_b[~clear]
-        short = b - a < shortest
-        valid[i_curve[short]] = False
-        i_curve, a, b, d_a, d_b = i_curve[~short], a[~short], b[~short], d_a[~short], d_b[~short]
+        fail = ~clear & (b - a >= shortest)
+        valid[i_curve[~clear & ~fail]] = False  # too short to split further and still not certified
+        i_curve, a, b, d_a, d_b, r = i_curve[fail], a[fail], b[fail], d_a[fail], d_b[fail], r[fail]
         if not len(i_curve):
             break
-        m = (a + b) / 2
-        d_m = evaluate(i_curve, m)
-        P = len(columns)
-        d_a, d_b = _pad(d_a, P), _pad(d_b, P)
-        i_curve = np.concatenate([i_curve, i_curve])
-        a, b = np.concatenate([a, m]), np.concatenate([m, b])
-        d_a, d_b = np.concatenate([d_a, d_m]), np.concatenate([d_m, d_b])
+        i_curve, a, b, d_a, d_b = _split(i_curve, a, b, d_a, d_b, r, floor, evaluate, len(columns))
     return [(bool(valid[k]), float(lowest[k]), pair[k], float(where[k]), int(evaluations[k])) for k in range(count)]
+
+
+def _split(
+    i_curve: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    d_a: np.ndarray,
+    d_b: np.ndarray,
+    rate: np.ndarray,
+    floor: float,
+    evaluate: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    columns: int,
+) -> tuple[np.ndarray, ...]:
+    """Split each uncertified interval ``[a, b]`` into equal pieces, all new points in one evaluation: as many
+    pieces as its worst pair would need if its distance stayed at the mean of its ends (``rate · h ≤ 2 (d̄ −
+    floor)``, times ``SPLIT_SAFETY``), 2 (halving) to ``MAX_PIECES``. One level of several pieces replaces several
+    levels of halving (each a batched evaluation); any split is as sound as halving (each piece gets the same
+    two-sided bound). Returns the pieces as (curve, a, b, d_a, d_b)."""
+    excess = (d_a + d_b) / 2 - floor  # > 0: both ends were evaluated at more than the floor
+    with np.errstate(divide="ignore", invalid="ignore"):
+        need = np.where(excess > 0, rate * (b - a)[:, None] / (2 * excess), np.inf)
+    need = np.nan_to_num(need, nan=0.0, posinf=np.inf).max(axis=1, initial=0.0)
+    pieces = np.clip(np.ceil(SPLIT_SAFETY * need), 2, MAX_PIECES).astype(int)
+    count = len(i_curve)
+    # the new points: j / pieces of each interval for j = 1 .. pieces - 1
+    inner = pieces - 1
+    first_inner = np.cumsum(inner) - inner
+    owner = np.repeat(np.arange(count), inner)
+    j = np.arange(owner.size) - first_inner[owner] + 1
+    m = a[owner] + (b - a)[owner] * (j / pieces[owner])
+    d_m = evaluate(i_curve[owner], m)
+    d_a, d_b = _pad(d_a, columns), _pad(d_b, columns)
+    d_a, d_b, d_m = (_pad(x, d_m.shape[1]) for x in (d_a, d_b, d_m))
+    # the pieces: k = 0 .. pieces - 1 of each interval, between its nodes a, m_1 .. m_{pieces-1}, b
+    parent = np.repeat(np.arange(count), pieces)
+    k = np.arange(parent.size) - (np.cumsum(pieces) - pieces)[parent]
+    first, last = k == 0, k == pieces[parent] - 1
+    left = np.clip(first_inner[parent] + k - 1, 0, len(m) - 1)
+    right = np.clip(first_inner[parent] + k, 0, len(m) - 1)
+    new_a = np.where(first, a[parent], m[left])
+    new_b = np.where(last, b[parent], m[right])
+    new_d_a = np.where(first[:, None], d_a[parent], d_m[left])
+    new_d_b = np.where(last[:, None], d_b[parent], d_m[right])
+    return i_curve[parent], new_a, new_b, new_d_a, new_d_b
 
 
 def _pad(d: np.ndarray, columns: int) -> np.ndarray:
