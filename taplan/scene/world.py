@@ -418,7 +418,8 @@ class CollisionWorld:
         """The engine's :class:`~taplan.scene.engine.BatchDistances` at N configurations (N, nq) with the Jacobian
         rows of the pairs within ``cutoff`` [m] (the other rows zero): :meth:`distances_many` as arrays, without a
         :class:`Distances` per configuration. None where :meth:`distances_many` goes one configuration at a time
-        (no engine, attached objects, non-finite configurations)."""
+        (no engine, attached objects, non-finite configurations). Pairs beyond the cutoff may report a lower bound
+        of their distance (still beyond the cutoff) instead of the distance."""
         Q = np.asarray(configurations, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != self.model.nq:
             raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
@@ -426,7 +427,9 @@ class CollisionWorld:
         engine = self.engine()
         if engine is None or self._attached_items() or not np.all(np.isfinite(Q)):
             return None
-        return engine.evaluate(Q, jacobian=True, jacobian_within=cutoff)
+        # pairs whose bounding spheres are farther apart than the cutoff report that gap (a lower bound, beyond the
+        # cutoff: left out like every pair beyond it) without the exact query
+        return engine.evaluate(Q, jacobian=True, jacobian_within=cutoff, bound_beyond=cutoff)
 
     def engine(self) -> Any:
         """The batched distance engine for the current scene (:class:`~taplan.scene.engine.DistanceEngine`), or
