@@ -40,8 +40,11 @@ DENSE_SOLVERS = ("daqp", "quadprog", "proxqp")  # given dense matrices; others g
 # ``solver="auto"``: daqp (dense active set) up to this many QP variables, osqp (sparse ADMM) above. The smoother's
 # two-arm QPs (850-1,180 variables, one slack per distance row) took daqp 0.24-1.06 s each on a quiet machine and
 # its dense setup runs outside daqp's time limit; osqp took a third to a sixth of that on the same paths, with
-# the same durations (window problems of bench_planning, refitted real body).
-LARGE_QP = 600
+# the same durations (window problems of bench_planning, refitted real body). The two-arm optimiser's QPs
+# (280-520 variables) crossed over near 300: 63 QPs of cubby/overhang/clutter/table problems, daqp 10-26 ms against
+# osqp 8-19 ms above 330 variables (first cubby QP: daqp 195 ms), daqp 2-3x faster below 160; the paths equal
+# to 1e-5 rad (osqp polishes its active set).
+LARGE_QP = 300
 OSQP_SETTINGS = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polish": True, "max_iter": 20000, "raise_error": False}
 REFINEMENTS = 4  # segment splits after a failed certification
 POINTS = 0.5  # its segments are certified at margin / 2 (every planner edge): evaluated points need no more
