@@ -91,3 +91,37 @@ def test_the_certificate_from_the_last_evaluation_gives_the_same_certified_path(
     for a, b in zip(reused.path[:-1], reused.path[1:], strict=True):  # half the margin along every segment [m]
         lowest = min(world.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 101))
         assert lowest >= MARGIN / 2 - 1e-9
+
+
+def test_a_rejected_step_shrinks_the_trust_region_below_it() -> None:
+    from taplan.planning.optimize import _shrunk_trust
+
+    assert _shrunk_trust(0.5, 0.4) == 0.25  # the step leaves the halved region: one halving [rad]
+    assert _shrunk_trust(0.5, 0.1) == 0.0625  # 0.25 and 0.125 still contain it: the same QP step, skipped
+    assert _shrunk_trust(0.5, 0.0) < 1e-3  # a null step: down to the end of the trust region's range
+
+
+def test_skipping_the_contained_trust_regions_gives_the_same_path(robot, monkeypatch) -> None:
+    from benchmarks._scenes import problems
+
+    [problem] = problems(1, 3, families=("cubby",))  # two arms; one rejected step is inside the halved region
+    world = CollisionWorld(robot, problem.scene)
+    start, goal = problem.start, problem.goal_q
+    active = np.flatnonzero(np.abs(goal - start) > 1e-12)
+    limits = robot.planning_limits
+    solves: list[int] = []
+    original_solve = optimize_module.qpsolvers.solve_qp
+
+    def counted(*args, **kwargs):
+        solves.append(1)
+        return original_solve(*args, **kwargs)
+
+    monkeypatch.setattr(optimize_module.qpsolvers, "solve_qp", counted)
+    skipping = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    skipped_solves = len(solves)
+    solves.clear()
+    monkeypatch.setattr(optimize_module, "_shrunk_trust", lambda trust, step: trust / 2)
+    halving = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    assert skipping is not None and halving is not None
+    np.testing.assert_allclose(skipping.path, halving.path, rtol=0, atol=1e-9)  # [rad]
+    assert skipped_solves < len(solves)  # the same path with fewer QPs

@@ -298,7 +298,7 @@ def _sequential_convex(
             if _lowest(evaluations) >= margin and improvement < 1e-3 * max(merit, 1e-9):
                 break
         else:
-            trust /= 2
+            trust = _shrunk_trust(trust, float(np.abs(x_new - x).max(initial=0.0)))
             if trust < 1e-3:
                 if _lowest(evaluations) >= margin:
                     break
@@ -308,6 +308,16 @@ def _sequential_convex(
                 if mu > 1e4:
                     break
     return (x_path if _lowest(evaluations) >= margin else None), iterations, known
+
+
+def _shrunk_trust(trust: float, step: float) -> float:
+    """The trust region after a rejected ``step`` (max-norm) [rad]: halved, and halved again while it still contains
+    the step (down to 1e-3). The rejected step stays the QP's optimum in every smaller trust region that contains it
+    (a smaller feasible set of the same strictly convex QP): solving those would reject the same step again."""
+    trust /= 2
+    while step <= trust and trust >= 1e-3:
+        trust /= 2
+    return trust
 
 
 def _linearised(
