@@ -20,6 +20,7 @@ __all__ = [
     "StreamError",
     "CollisionError",
     "PlanningError",
+    "UnseenSpaceError",
 ]
 
 
@@ -123,3 +124,15 @@ class CollisionError(TaplanError):
 
 class PlanningError(TaplanError):
     """No collision-free motion was found; the message says which stage failed and why."""
+
+
+class UnseenSpaceError(PlanningError):
+    """A motion in a perceived scene needs space no camera view has seen free (and views could not see it).
+
+    Attributes:
+        unseen: Centres (N, 3) [m, root frame] of the unseen voxels the motion needed.
+    """
+
+    def __init__(self, message: str, unseen: object = ()) -> None:
+        super().__init__(message)
+        self.unseen = unseen

@@ -12,6 +12,7 @@ from taplan.planning.motion import MotionPlan, PlanReport, plan_motion
 from taplan.planning.optimize import OptimizedPath, optimize_path
 from taplan.planning.replan import ReplanEvent, Replanner
 from taplan.planning.rrt import rrt_connect, shortcut
+from taplan.planning.seen import LookRound, SeenPlan, plan_seen
 from taplan.planning.verify import SegmentCheck, Verification, check_segment, check_segments, verify_trajectory
 
 __all__ = [
@@ -34,4 +35,7 @@ __all__ = [
     "OptimizedPath",
     "rrt_connect",
     "shortcut",
+    "plan_seen",
+    "SeenPlan",
+    "LookRound",
 ]

@@ -1,0 +1,180 @@
+"""Look where you go (:func:`taplan.planning.plan_seen`): a board in the one part of the workspace no image has
+seen, an arm motion whose straight path goes through the board; the loop looks at what the motion sweeps, sees the
+board and plans around it (checked against the true board with coal, independently of the voxels); a goal in unseen
+space is looked at before any plan; views that see nothing new end in an error naming the unseen space."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pytest
+
+import taplan
+from taplan.errors import InvalidInputError, UnseenSpaceError
+from taplan.planning import plan_seen
+from taplan.planning.seen import _swept_unknown
+from taplan.planning.verify import check_segment
+from taplan.scene import Box, CollisionWorld, Perception, Scene
+from taplan.scene.camera import PinholeCamera
+from taplan.scene.scan import RenderedViews
+
+SMALL = PinholeCamera(160, 120, 84.25, 84.25, 80.0, 60.0)  # the wrist camera's field of view at 1/4 resolution
+BOARD_CENTRE = np.array([0.65, 0.0, -0.35])  # below the hands at home
+BOARD_SIZE = (0.35, 0.5, 0.02)
+WORKSPACE = ((0.3, -0.45, -0.6), (1.0, 0.45, -0.1))  # around the board (smaller than the default: faster tests)
+
+
+@pytest.fixture(scope="module")
+def robot() -> taplan.Robot:
+    return taplan.Robot.teleavatar()
+
+
+def _board_scene() -> Scene:
+    scene = Scene()
+    scene.add("board", Box(BOARD_SIZE), (BOARD_CENTRE.tolist(), [0, 0, 0, 1]))
+    return scene
+
+
+UNSEEN = ((0.45, -0.3, -0.4), (0.85, 0.3, -0.3))  # [m] the box around the board no image has seen yet
+
+
+def _seen_but_the_board(robot: taplan.Robot, unknown: str = "occluded") -> Perception:
+    """A map whose workspace is known free except a box around the board (unseen: counted as an obstacle); the
+    board itself has not been seen."""
+    perception = Perception(robot, resolution=0.01, workspace=WORKSPACE, unknown=unknown)
+    h = perception.grid.resolution
+    lo, hi = np.asarray(WORKSPACE[0]), np.asarray(WORKSPACE[1])
+    axes = [np.arange(a + h / 2, b, h) for a, b in zip(lo, hi, strict=True)]
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    inside = np.all((centres >= UNSEEN[0]) & (centres <= UNSEEN[1]), axis=1)
+    keys, _ = perception.grid.keys(centres[~inside])
+    perception.grid.mark_free(keys)
+    perception.update_scene()
+    return perception
+
+
+def _through_the_board(robot: taplan.Robot) -> list[np.ndarray]:
+    """A seeded left-arm motion whose straight segment goes through the true board, with ends clear of it and of
+    the unseen box."""
+    truth = CollisionWorld(robot, _board_scene())
+    unseen = CollisionWorld(robot, _seen_but_the_board(robot).scene)
+    rng = np.random.default_rng(11)
+    limits = robot.planning_limits
+    idx = robot.group("left").indices
+    for _ in range(500):
+        q = [robot.home.copy(), robot.home.copy()]
+        for k in range(2):
+            q[k][idx] = limits.lower[idx] + rng.uniform(0.05, 0.95, len(idx)) * (limits.upper[idx] - limits.lower[idx])
+        if min(min(truth.min_distance(c)[0], unseen.min_distance(c)[0]) for c in q) < 0.03:
+            continue
+        if not check_segment(truth, q[0], q[1], 0.0).valid:
+            return q
+    raise AssertionError("no seeded motion through the board")
+
+
+def _true_clearance(perception: Perception, trajectory: taplan.Trajectory) -> float:
+    """The smallest distance [m] between the robot's capsules along ``trajectory`` (dense) and the TRUE board,
+    computed with coal alone (not with taplan's collision world or the voxels)."""
+    board = coal.Box(*BOARD_SIZE)
+    board_pose = coal.Transform3s(np.eye(3), BOARD_CENTRE)
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    best = np.inf
+    for t in np.linspace(0.0, trajectory.duration, 300):
+        starts, ends, radii = perception.robot_segments(trajectory(t))
+        for a, b, r in zip(starts, ends, radii, strict=True):
+            axis = b - a
+            length = float(np.linalg.norm(axis))
+            z = axis / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])
+            x = np.cross([1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0], z)
+            x /= np.linalg.norm(x)
+            R = np.column_stack([x, np.cross(z, x), z])
+            result.clear()
+            d = coal.distance(
+                board, board_pose, coal.Capsule(r, length), coal.Transform3s(R, (a + b) / 2), request, result
+            )
+            best = min(best, d)
+    return float(best)
+
+
+def test_the_loop_looks_at_the_unseen_board_and_plans_around_it(robot: taplan.Robot) -> None:
+    start, goal = _through_the_board(robot)
+    perception = _seen_but_the_board(robot)
+    half = np.asarray(BOARD_SIZE) / 2 - 0.001
+    board = np.stack(np.meshgrid(*[np.linspace(-h, h, 15) for h in half], indexing="ij"), -1).reshape(-1, 3)
+    board_voxels, inside = perception.grid.keys(board + BOARD_CENTRE)
+    assert inside.all() and not perception.grid.occupied[board_voxels].any()  # the board is not seen
+    capture = RenderedViews(perception, _board_scene(), camera=SMALL, seed=0)
+    seen = plan_seen(robot, perception, start, goal, capture, camera=SMALL, max_time=20.0, seed=0)
+    assert seen.rounds and seen.rounds[0].views and capture.count == len(seen.views) > 0
+    assert perception.grid.occupied[board_voxels].any()  # a view saw the board
+    trajectory = seen.plan.trajectory
+    assert np.allclose(trajectory(0.0), start, atol=1e-6) and np.allclose(
+        trajectory(trajectory.duration), goal, atol=1e-6
+    )
+    assert _true_clearance(perception, trajectory) > 0.0
+    # the plan stays where the images saw free space: nothing counted unknown within its bodies
+    assert not len(_swept_unknown(perception, trajectory(np.linspace(0.0, trajectory.duration, 100)), 0.0))
+    assert seen.total_time >= seen.plan_time > 0.0
+
+
+def _goal_in_unseen(robot: taplan.Robot, perception: Perception) -> np.ndarray:
+    """A seeded left-arm configuration clear of the true board whose gripper reaches 1 cm into counted unknown
+    space."""
+    truth = CollisionWorld(robot, _board_scene())
+    unseen = CollisionWorld(robot, perception.scene)
+    rng = np.random.default_rng(5)
+    limits = robot.planning_limits
+    idx = robot.group("left").indices
+    for _ in range(500):
+        q = robot.home.copy()
+        q[idx] = limits.lower[idx] + rng.uniform(0.05, 0.95, len(idx)) * (limits.upper[idx] - limits.lower[idx])
+        if truth.min_distance(q)[0] >= 0.03 and unseen.min_distance(q)[0] < -0.01:
+            return q
+    raise AssertionError("no seeded goal in unseen space")
+
+
+def test_a_goal_in_unseen_space_is_looked_at_before_planning(robot: taplan.Robot) -> None:
+    perception = _seen_but_the_board(robot)
+    start, goal = robot.home, _goal_in_unseen(robot, perception)
+    unseen = _swept_unknown(perception, goal[None, :], 0.02)
+    capture = RenderedViews(perception, _board_scene(), camera=SMALL, seed=1)
+    seen = plan_seen(robot, perception, start, goal, capture, camera=SMALL, max_time=20.0, seed=1)
+    first = seen.rounds[0]
+    assert first.plan_time == 0.0 and first.views  # views before any plan
+    assert first.resolved > 0 and first.unseen == len(unseen)
+    assert np.allclose(seen.plan.trajectory(seen.plan.trajectory.duration), goal, atol=1e-6)
+    assert _true_clearance(perception, seen.plan.trajectory) > 0.0
+    counted = np.zeros(perception.grid.occupied.shape, dtype=bool)
+    counted[perception.grid.unknown_keys("occluded")] = True
+    assert counted[unseen].sum() < len(unseen)  # images saw into the goal's space
+
+
+def test_views_that_see_nothing_new_end_in_an_error_naming_the_unseen_space(robot: taplan.Robot) -> None:
+    # all unseen space counts (with "occluded", what the robot's own bodies hide in an image counts as viewed)
+    perception = _seen_but_the_board(robot, "occupied")
+    start, goal = robot.home, _goal_in_unseen(robot, perception)
+
+    def covered(frame: str, q: np.ndarray) -> tuple[np.ndarray, PinholeCamera]:
+        # a covered lens: a surface 6 cm in front of the camera everywhere, all behind it hidden (an image of NaN,
+        # no return at all, would say "nothing there": that is what a depth camera reports for empty space)
+        return np.full((SMALL.height, SMALL.width), 0.06, dtype=np.float32), SMALL
+
+    with pytest.raises(UnseenSpaceError, match=r"voxels \(1 cm\) in x, y, z = \[") as info:
+        plan_seen(robot, perception, start, goal, covered, camera=SMALL, rounds=2, max_time=5.0)
+    assert "no view has seen free" in str(info.value)
+    centres = np.asarray(info.value.unseen)
+    assert centres.ndim == 2 and centres.shape[1] == 3 and len(centres) > 0
+    lo, hi = np.asarray(WORKSPACE[0]), np.asarray(WORKSPACE[1])
+    assert np.all((centres >= lo) & (centres <= hi))  # unseen space is workspace space
+
+
+def test_plan_seen_checks_its_arguments(robot: taplan.Robot) -> None:
+    start, goal = robot.home, robot.home + 0.1
+    loose = Perception(robot, resolution=0.05, unknown="free")
+    with pytest.raises(InvalidInputError, match="perception"):
+        plan_seen(robot, loose, start, goal, lambda f, q: None)
+    perception = Perception(robot, resolution=0.05, workspace=WORKSPACE)
+    with pytest.raises(InvalidInputError, match="capture"):
+        plan_seen(robot, perception, start, goal, "camera")
+    with pytest.raises(InvalidInputError, match="rounds"):
+        plan_seen(robot, perception, start, goal, lambda f, q: None, rounds=-1)
