@@ -421,7 +421,8 @@ def markdown(results: dict[str, Any], note: str) -> str:
                 "",
                 "Look where you go (`taplan.planning.plan_seen`): plan with unseen space free, look (wrist-camera "
                 "views chosen from the map, rendered, fused) at the unseen voxels the plan sweeps, re-plan when "
-                "something was seen in the way; every returned plan certified against occupied + counted unknown voxels. "
+                "something was seen in the way; every returned plan certified against occupied + counted unknown "
+                "voxels. "
                 f"Whole loop per solved problem (plans, view choice, rendering, fusion, certificate): median "
                 f"{loop['median_total']:.2f} s wall ({loop['median_total_cpu']:.2f} s CPU), p95 "
                 f"{loop['p95_total']:.2f} s; its ratio to the true-primitive plan on the problems both solved: "
