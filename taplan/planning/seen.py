@@ -9,18 +9,23 @@ detours lie there. :func:`plan_seen` closes the loop the way a person does, by l
    one voxel; the counted unknown voxels in it are what must be seen before the plan may run;
 3. none: certify the plan (:func:`~taplan.planning.verify_trajectory`) against the occupied AND the counted unknown
    voxels and return it; some: choose wrist-camera views that see them (:func:`~taplan.scene.scan.views_seeing`,
-   from the map only, configurations clear of occupied and unknown space), ``capture`` each, fuse; when something
+   from the map only, configurations clear of the occupied voxels), ``capture`` each, fuse; when something
    was seen where the plan goes, go to 1, else to 2 with the same plan (a joint goal inside unseen space is looked
    at before the first plan);
 4. when two rounds of views in a row resolve nothing or the rounds run out: plan conservatively (unknown counted as
    occupied); when that fails too, :class:`~taplan.errors.UnseenSpaceError` names the unseen space the motion needs.
 
 Every returned plan is certified against the occupied and the counted unknown voxels, so it runs in space the
-images saw free (or the robot's own bodies filled). What is simulated: ``capture(frame, q)`` returns the image the
-camera takes with the arm at ``q``; :class:`~taplan.scene.scan.RenderedViews` renders it without moving anything,
-so the motions to the views are neither planned nor timed. On the robot, ``capture`` plans and executes the motion
-to ``q`` in the seen space (``plan_motion`` with the perception's scene, which counts unknown space; the view
-configurations are chosen clear of it), waits for the next depth image of that camera and returns it.
+images saw free (or the robot's own bodies filled at the start and at earlier captures). The view configurations are
+chosen clear of the occupied voxels, not of unseen space (a wrist camera that must look at unseen space near the
+body often stands in some), so the loop does not mark the robot's space at a view known free: only the images do.
+
+What is simulated: ``capture(frame, q)`` returns the image the camera takes with the arm at ``q``;
+:class:`~taplan.scene.scan.RenderedViews` renders it without moving anything, so the motions to the views are
+neither planned nor timed, and a view may stand where the robot could not safely go. On the robot, ``capture``
+plans the motion to ``q`` in the seen space (``plan_motion`` with ``perception.scene``, which counts unseen space),
+executes it, waits for the next depth image of that camera and returns it; when there is no such motion it returns
+None and the view is skipped (two rounds without anything resolved end the looking).
 """
 
 from __future__ import annotations
@@ -190,7 +195,7 @@ def plan_seen(
     perception: Perception,
     start: npt.ArrayLike,
     goal: npt.ArrayLike | Mapping[str, Any],
-    capture: Callable[[str, np.ndarray], tuple[np.ndarray, PinholeCamera]],
+    capture: Callable[[str, np.ndarray], tuple[np.ndarray, PinholeCamera] | None],
     *,
     rounds: int = 6,
     views_per_round: int = 4,
@@ -211,7 +216,8 @@ def plan_seen(
         start, goal: As for :func:`~taplan.planning.plan_motion` (a configuration, or pose targets).
         capture: ``capture(camera frame, configuration) -> (depth image [m], PinholeCamera)``: the image that
             camera takes with the robot at that configuration (:class:`~taplan.scene.scan.RenderedViews` in a
-            simulation; on the robot: move there in the seen space and return the next image).
+            simulation; on the robot: move there in the seen space and return the next image), or None when it
+            cannot go there.
         rounds: Rounds of looking at most; views_per_round: views per round at most.
         samples: Random candidate configurations per wrist camera for each round's view choice; aimed: candidates
             per wrist camera aimed at the unseen space by IK.
@@ -282,14 +288,20 @@ def plan_seen(
             count=views_per_round,
             samples=samples,
             seed=seed + 7919 * (round_ + 1),
-            clear_of=full,
-            # beyond the padding: the padded bodies' space, marked known free at a capture, must not be unseen space
-            clearance=perception.padding + 1e-3,
+            clear_of=optimistic,  # not inside what was seen occupied (unseen space may hold the view: see below)
             extra=_aimed(robot, perception, points, q0, aimed, rng),
         )
+        taken = []
         for frame, q in views:
-            depth, used = capture(frame, q)
-            perception.integrate_depth(depth, used, frame=frame, q=q)
+            image = capture(frame, q)
+            if image is None:
+                continue  # the capture could not go there (e.g. no motion to it in the seen space)
+            depth, used = image
+            # the robot's space at the view is not marked known free: only what the image sees counts (a view may
+            # stand in unseen space; in a simulation the arm never went there)
+            perception.integrate_depth(depth, used, frame=frame, q=q, robot_there=False)
+            taken.append((frame, q))
+        views = taken
         perception.update_scene()
         _optimistic_scene(perception, optimistic_scene)
         resolved = int(np.count_nonzero(~_counted_unknown(perception)[targets]))

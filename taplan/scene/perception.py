@@ -227,6 +227,7 @@ class Perception:
         T_root_camera: Any = None,
         step: int | None = None,
         big_endian: bool = False,
+        robot_there: bool = True,
     ) -> Integration:
         """Fuse one depth image.
 
@@ -238,6 +239,9 @@ class Perception:
                 capture configuration; or give ``T_root_camera`` (4x4) directly.
             q: The configuration at capture time; None: from :attr:`history` at ``stamp``.
             stamp: Capture time [s] (also the voxels' "seen" time for ``decay``).
+            robot_there: The robot stood at the capture configuration, so its padded bodies' space is marked known
+                free; False (an image rendered at a configuration the robot did not move to): only the image
+                marks space known free (the bodies still filter their own points).
         """
         camera = camera if isinstance(camera, PinholeCamera) else PinholeCamera.from_camera_info(camera)
         if encoding is None:
@@ -275,7 +279,8 @@ class Perception:
             self.grid.mark_seen_free(
                 depth, camera.intrinsics, T, self.free_margin, max_range=self.max_range, ignore=ignore
             )
-        self.grid.mark_free(own)  # the robot filled its own space when the image was taken
+        if robot_there:
+            self.grid.mark_free(own)  # the robot filled its own space when the image was taken
         return Integration(measured, kept, cleared, T)
 
     def integrate_points(
