@@ -233,6 +233,7 @@ def _plan_seen(robot: taplan.Robot, perception: Perception, truth: tuple[Collisi
             camera=SCAN_CAMERA,
             max_time=MAX_TIME,
             seed=problem.index,
+            nothing_unshadows=True,  # rendered images: no return means nothing within range
         )
     except TaplanError as exc:
         return {

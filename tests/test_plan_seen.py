@@ -178,3 +178,44 @@ def test_plan_seen_checks_its_arguments(robot: taplan.Robot) -> None:
         plan_seen(robot, perception, start, goal, "camera")
     with pytest.raises(InvalidInputError, match="rounds"):
         plan_seen(robot, perception, start, goal, lambda f, q: None, rounds=-1)
+
+
+def test_a_view_into_nothing_unshadows_only_from_known_space_and_not_behind_the_robot() -> None:
+    """A wall shadows what is behind it; the wall gone (the scene changed), a camera above looking down through that
+    space into nothing unshadows it, but not through pixels of the robot's own bodies, and not from a camera that
+    stands in unknown space of the region."""
+    from taplan.scene.camera import look_at
+    from taplan.scene.occupancy import OccupancyGrid
+    from taplan.scene.raycast import render_depth
+
+    region = ((0.0, -0.5, -0.5), (1.0, 0.5, 0.5))
+    wall = Scene()
+    wall.add("wall", Box((0.02, 0.4, 0.4)), ([0.6, 0.0, 0.0], [0, 0, 0, 1]))
+    behind = np.array([[0.8, 0.0, 0.0]])
+
+    def shadowed_grid() -> OccupancyGrid:
+        grid = OccupancyGrid(0.02, region=region)
+        T = look_at([0.05, 0.0, 0.0], [1.0, 0.0, 0.0])
+        depth = render_depth(SMALL, T, wall)
+        grid.mark_seen_free(depth, SMALL.intrinsics, T, margin=0.02, max_range=3.0)
+        assert grid.shadowed[grid.keys(behind)[0]].all()
+        return grid
+
+    above = look_at([0.8, 0.0, 0.8], [0.8, 0.0, 0.0])  # outside the region, looking down
+    nothing = np.full((SMALL.height, SMALL.width), np.nan, dtype=np.float32)
+    grid = shadowed_grid()
+    assert grid.unshadow_seen_into_nothing(nothing, SMALL.intrinsics, above, max_range=3.0) > 0
+    assert not grid.shadowed[grid.keys(behind)[0]].any()
+    key = grid.keys(behind)[0]
+    assert not grid.free[key].any() and key[0] not in set(grid.unknown_keys("occluded").tolist())  # unknown, not free
+
+    grid = shadowed_grid()  # the robot's own pixels in the middle of the image hide what is behind them
+    own = np.zeros((SMALL.height, SMALL.width), dtype=bool)
+    own[40:80, 60:100] = True
+    grid.unshadow_seen_into_nothing(nothing, SMALL.intrinsics, above, max_range=3.0, ignore=own)
+    assert grid.shadowed[grid.keys(behind)[0]].all()
+
+    grid = shadowed_grid()  # a camera inside the region's unknown space (it may stand inside an unseen object)
+    inside = look_at([0.8, 0.0, 0.3], [0.8, 0.0, 0.0])
+    assert grid.unshadow_seen_into_nothing(nothing, SMALL.intrinsics, inside, max_range=3.0) == 0
+    assert grid.shadowed[grid.keys(behind)[0]].all()

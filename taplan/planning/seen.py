@@ -201,6 +201,7 @@ def plan_seen(
     views_per_round: int = 4,
     samples: int = 150,
     aimed: int = 6,
+    nothing_unshadows: bool = False,
     camera: PinholeCamera = WRIST_DEPTH_CAMERA,
     margin: float = DEFAULT_MARGIN,
     max_time: float = 10.0,
@@ -222,6 +223,9 @@ def plan_seen(
         samples: Random candidate configurations per wrist camera for each round's view choice; aimed: candidates
             per wrist camera aimed at the unseen space by IK.
         camera: The camera model the views are chosen for (its field of view and range).
+        nothing_unshadows: A shadowed voxel a view looks at through pixels without any return counts no longer
+            (``Perception.integrate_depth``): right for rendered images, where no return means nothing within
+            range; a real depth camera also returns nothing from dark, shiny or too-close surfaces.
         margin, max_time, seed, plan_options: Passed to every ``plan_motion`` call (``max_time`` per call).
 
     Returns:
@@ -299,7 +303,9 @@ def plan_seen(
             depth, used = image
             # the robot's space at the view is not marked known free: only what the image sees counts (a view may
             # stand in unseen space; in a simulation the arm never went there)
-            perception.integrate_depth(depth, used, frame=frame, q=q, robot_there=False)
+            perception.integrate_depth(
+                depth, used, frame=frame, q=q, robot_there=False, nothing_unshadows=nothing_unshadows
+            )
             taken.append((frame, q))
         views = taken
         perception.update_scene()

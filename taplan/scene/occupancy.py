@@ -772,3 +772,53 @@ class OccupancyGrid:
     def snapshot(self) -> Occupancy:
         """The occupied voxels now, as an obstacle shape in the root frame."""
         return Occupancy(self.resolution, self.origin.copy(), self.indices(self.occupied_keys()))
+
+    def unshadow_seen_into_nothing(
+        self,
+        depth: np.ndarray,
+        intrinsics: tuple[float, float, float, float],
+        T_root_camera: np.ndarray,
+        *,
+        max_range: float,
+        ignore: np.ndarray | None = None,
+    ) -> int:
+        """Shadowed, unknown region voxels that a depth image (metres, NaN = no return) views through pixels without
+        any return around them (no valid depth among the 3x3 pixels around the centre's pixel, none of them in
+        ``ignore``, the robot's own) and within ``max_range``: nothing stood in front of them or at them along those
+        rays, so they are no longer shadowed (they stay unknown, viewed into nothing). Only from a camera whose own
+        voxel is known free or outside the region (a camera inside an unseen object sees nothing either). Returns
+        how many."""
+        eye, _ = self.keys(T_root_camera[None, :3, 3])
+        if len(eye) and not self.free[eye[0]] and self._region_contains(T_root_camera[:3, 3]):
+            return 0
+        keys = self._region_keys
+        keys = keys[self.shadowed[keys] & ~(self.occupied[keys] | self.free[keys])]
+        if not len(keys):
+            return 0
+        fx, fy, cx, cy = intrinsics
+        H, W = depth.shape
+        R, t = T_root_camera[:3, :3], T_root_camera[:3, 3]
+        local = (self.centers(keys) - t) @ R
+        z = local[:, 2]
+        ahead = np.flatnonzero((z > 1e-3) & (z <= max_range))
+        z = z[ahead]
+        u = np.floor(fx * local[ahead, 0] / z + cx)
+        v = np.floor(fy * local[ahead, 1] / z + cy)
+        inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
+        rows = ahead[inside]
+        pixel = v[inside].astype(np.int64) * W + u[inside].astype(np.int64)
+        raw = depth.astype(np.float32, copy=True)
+        if ignore is not None:
+            raw[ignore] = 0.0  # a window holding a robot pixel is not "nothing": the robot hides what is behind
+        nothing = np.isnan(_nearest_around(raw).reshape(-1)[pixel])
+        found = keys[rows[nothing]]
+        self.shadowed[found] = False
+        if len(found):
+            self.version += 1
+        return len(found)
+
+    def _region_contains(self, point: np.ndarray) -> bool:
+        if self.region is None:
+            return False
+        lo, hi = self.region
+        return bool(np.all(point >= lo) and np.all(point <= hi))

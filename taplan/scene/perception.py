@@ -228,6 +228,7 @@ class Perception:
         step: int | None = None,
         big_endian: bool = False,
         robot_there: bool = True,
+        nothing_unshadows: bool = False,
     ) -> Integration:
         """Fuse one depth image.
 
@@ -242,6 +243,9 @@ class Perception:
             robot_there: The robot stood at the capture configuration, so its padded bodies' space is marked known
                 free; False (an image rendered at a configuration the robot did not move to): only the image
                 marks space known free (the bodies still filter their own points).
+            nothing_unshadows: With ``unknown="occluded"``: shadowed voxels this image views into nothing (no
+                return around their pixel; see :meth:`OccupancyGrid.unshadow_seen_into_nothing`) no longer count.
+                Right for rendered images; a real camera also returns nothing from dark or too-close surfaces.
         """
         camera = camera if isinstance(camera, PinholeCamera) else PinholeCamera.from_camera_info(camera)
         if encoding is None:
@@ -279,6 +283,10 @@ class Perception:
             self.grid.mark_seen_free(
                 depth, camera.intrinsics, T, self.free_margin, max_range=self.max_range, ignore=ignore
             )
+            if nothing_unshadows and self.unknown == "occluded":
+                self.grid.unshadow_seen_into_nothing(
+                    depth, camera.intrinsics, T, max_range=self.max_range, ignore=self.grid.excluded_pixels
+                )
         if robot_there:
             self.grid.mark_free(own)  # the robot filled its own space when the image was taken
         return Integration(measured, kept, cleared, T)
