@@ -226,7 +226,8 @@ def plan_seen(
         nothing_unshadows: A shadowed voxel a view looks at through pixels without any return counts no longer
             (``Perception.integrate_depth``): right for rendered images, where no return means nothing within
             range; a real depth camera also returns nothing from dark, shiny or too-close surfaces.
-        margin, max_time, seed, plan_options: Passed to every ``plan_motion`` call (``max_time`` per call).
+        margin, max_time, seed, plan_options: Passed to every ``plan_motion`` call (``max_time`` per call; an
+            optimistic plan that finds no path within it is tried once more with the next seed).
 
     Returns:
         The plan, certified against the occupied and the counted unknown voxels, and how it was found.
@@ -264,7 +265,14 @@ def plan_seen(
         round_plan = 0.0
         if plan is None and not len(targets):
             plan_clock, cpu_clock = time.perf_counter(), time.process_time()
-            plan = plan_motion(robot, q0, goal, world=optimistic, **options)
+            try:
+                plan = plan_motion(robot, q0, goal, world=optimistic, **options)
+            except PlanningError as exc:
+                if "no collision-free path found within" not in str(exc):
+                    raise
+                # a sampled search that ran out of time: once more with other random choices
+                plan_clock, cpu_clock = time.perf_counter(), time.process_time()
+                plan = plan_motion(robot, q0, goal, world=optimistic, **{**options, "seed": options["seed"] + 1})
             plan_time = round_plan = time.perf_counter() - plan_clock
             plan_cpu = time.process_time() - cpu_clock
         if plan is not None and not len(targets):
