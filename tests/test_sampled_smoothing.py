@@ -284,3 +284,60 @@ def test_a_mostly_blocked_straight_segment_goes_to_the_sampler_at_once(
     monkeypatch.setattr(motion, "SAMPLER_FIRST", share + 1e-6)  # not blocked enough
     plan_motion(robot, robot.home, goal, world=world, max_time=10.0, seed=0)
     assert calls
+
+
+def test_the_sampled_path_is_certified_only_when_its_smoothed_path_is_not_used(
+    robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The sampler hands its path over uncertified; the smoothed path carries the certificate. When smoothing gives
+    nothing the sampled path is certified then, and when that certificate refuses an edge the sampler searches again
+    certifying what it finds: every plan stays certified along its timed trajectory."""
+    world = _box_on_table(robot)
+    goal = robot.home.copy()
+    goal[robot.group("right").indices] = ACROSS
+    certified: list[int] = []
+    real = motion.certify_path
+
+    def counting(world, path, margin, deadline=float("inf")):  # noqa: ANN001, ANN202 (a stand-in)
+        certified.append(len(path))
+        return real(world, path, margin, deadline)
+
+    monkeypatch.setattr(motion, "certify_path", counting)
+    plan = plan_motion(robot, robot.home, goal, world=world, stages=("rrt-connect",), max_time=20.0, seed=0)
+    assert plan.report.smoothed and len(certified) == 1 and certified[0] == len(plan.path)  # the smoothed one only
+
+    def clearance(plan: motion.MotionPlan) -> float:
+        index = robot.indices(plan.trajectory.joint_names)
+        lowest = np.inf
+        for t in np.linspace(0, plan.trajectory.duration, 200):
+            q = robot.home.copy()
+            q[index] = plan.trajectory(t)
+            lowest = min(lowest, world.min_distance(q)[0])
+        return lowest
+
+    monkeypatch.setattr(motion, "_smooth_sampled", lambda *args: None)
+    certified.clear()
+    plan = plan_motion(robot, robot.home, goal, world=world, stages=("rrt-connect",), max_time=20.0, seed=0)
+    assert not plan.report.smoothed and len(certified) == 1  # the sampled path, certified now
+    assert clearance(plan) >= MARGIN / 4 - 1e-9
+
+    refused: list[int] = []
+
+    def refuse_once(world, path, margin, deadline=float("inf")):  # noqa: ANN001, ANN202 (a stand-in)
+        if not refused:
+            refused.append(len(path))
+            return None
+        return real(world, path, margin, deadline)
+
+    monkeypatch.setattr(motion, "certify_path", refuse_once)
+    searched: list[bool] = []
+    real_find = motion._find_path
+
+    def recording_find(*args, **options):  # noqa: ANN002, ANN003, ANN202 (a stand-in)
+        searched.append(options.get("certify", True))
+        return real_find(*args, **options)
+
+    monkeypatch.setattr(motion, "_find_path", recording_find)
+    plan = plan_motion(robot, robot.home, goal, world=world, stages=("rrt-connect",), max_time=20.0, seed=0)
+    assert refused and searched == [False, True]  # searched again, certifying
+    assert clearance(plan) >= MARGIN / 4 - 1e-9

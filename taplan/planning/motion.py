@@ -182,10 +182,12 @@ def _find_path(
     deadline: float,
     rng: np.random.Generator,
     times: dict[str, float],
+    certify: bool = True,
 ) -> tuple[str, list[np.ndarray], SegmentCheck | None, float] | None:
     """(stage, path, the straight segment's certificate or None, the margin the path keeps): the first stage in
     ``stages`` that finds a certified path before ``deadline`` (``time.perf_counter()``), else None; a sampled path
-    is shortcut but not yet smoothed.
+    is shortcut but not yet smoothed, and without ``certify`` not yet certified (the caller certifies the smoothed
+    path, and this one only when the smoothed one is not used).
 
     The optimiser gets ``OPTIMIZE_SHARE`` of the search time when the sampler follows it. The sampler tries the
     margins of :func:`_margins` in turn (``MARGIN_SHARES`` of the time left each, the floor all that remains): a
@@ -235,12 +237,32 @@ def _find_path(
             if len(groups) > 1 and sum(g.size for g in groups) == active.size:  # both arms: one, then the other
                 left = GROUPS_SHARE * max(deadline - time.perf_counter(), 0.0)
                 sampled = rrt_connect_groups(
-                    world, q0, q1, groups, limits.lower, limits.upper, margins, shares=shares, max_time=left, rng=rng
+                    world,
+                    q0,
+                    q1,
+                    groups,
+                    limits.lower,
+                    limits.upper,
+                    margins,
+                    shares=shares,
+                    max_time=left,
+                    rng=rng,
+                    certify=certify,
                 )
             if sampled is None:
                 left = max(deadline - time.perf_counter(), 0.0)
                 sampled = rrt_connect_shrinking(
-                    world, q0, q1, active, limits.lower, limits.upper, margins, shares=shares, max_time=left, rng=rng
+                    world,
+                    q0,
+                    q1,
+                    active,
+                    limits.lower,
+                    limits.upper,
+                    margins,
+                    shares=shares,
+                    max_time=left,
+                    rng=rng,
+                    certify=certify,
                 )
             if sampled is not None:
                 times["sample"] += time.perf_counter() - clock
@@ -769,7 +791,9 @@ def plan_motion(
     b = next((p.clear for p in approaches if p.end == "goal"), q1)
     reserve = float(np.clip(FINISH_SHARE * max_time, FINISH_MIN, FINISH_MAX))
     if np.abs(b - a).max() > 1e-12:
-        found = _find_path(world, a, b, active, limits, margin, floor, stages, deadline - reserve, rng, times)
+        found = _find_path(
+            world, a, b, active, limits, margin, floor, stages, deadline - reserve, rng, times, certify=False
+        )
         if found is None:
             raise PlanningError(
                 f"no collision-free path found within {max_time:g} s (stages: {', '.join(stages)}; "
@@ -779,11 +803,6 @@ def plan_motion(
     else:
         stage, path, certificate, kept = "straight", [a, b], None, margin  # both ends retreat to one clear one
     notes: list[str] = []
-    if kept < margin:
-        notes.append(
-            f"no path that keeps the {margin * 1e3:.1f} mm margin was found in time; this one keeps "
-            f"{kept * 1e3:.2f} mm (edges half, the timed trajectory a quarter)"
-        )
     timed: _Timed | str | None = None
     smoothed = False
     if stage == "rrt-connect":
@@ -823,12 +842,44 @@ def plan_motion(
                     )
                 else:
                     path, timed, smoothed = smooth, better, True
+    if timed is None and stage == "rrt-connect":
+        # the sampled path itself was not certified yet (its smoothed path carried the certificate): now it is, and
+        # if an edge is refused the sampler searches again, certifying what it finds
+        clock = time.perf_counter()
+        certified = certify_path(world, path, kept, deadline)
+        times["sample"] += time.perf_counter() - clock
+        if certified is None and time.perf_counter() < deadline:
+            again = _find_path(
+                world,
+                a,
+                b,
+                active,
+                limits,
+                margin,
+                floor,
+                ("rrt-connect",),
+                (time.perf_counter() + deadline) / 2,
+                rng,
+                times,
+                certify=True,
+            )
+            if again is not None:
+                certified, kept = again[1], again[3]
+        if certified is None:
+            raise PlanningError(f"no sampled path was certified within {max_time:g} s")
+        path = certified
     if timed is None:
         timed = _time_and_verify(
             robot, world, path, approaches, active, limits, q0, q1, kept, max_deviation, deadline, times, certificate
         )
         if isinstance(timed, str):
             raise PlanningError(timed)
+    if kept < margin:
+        notes.insert(
+            0,
+            f"no path that keeps the {margin * 1e3:.1f} mm margin was found in time; this one keeps "
+            f"{kept * 1e3:.2f} mm (edges half, the timed trajectory a quarter)",
+        )
     geometric = np.array(path)
     report = PlanReport(
         success=True,

@@ -192,10 +192,13 @@ def rrt_connect_shrinking(
     step: float = STEP,
     max_time: float = 10.0,
     rng: np.random.Generator | None = None,
+    certify: bool = True,
 ) -> tuple[list[np.ndarray], float] | None:
     """(path, the margin it keeps): RRT-Connect at each of ``margins`` (widest first) in turn, ``shares[k]`` of the
     time left at margin ``k`` (the last margin: all of it), the trees growing on across margins; the path is
-    shortcut and every edge certified to keep half its margin. None when ``max_time`` [s] runs out."""
+    shortcut and every edge certified to keep half its margin. None when ``max_time`` [s] runs out. Without
+    ``certify`` the first path found is returned uncertified (its explored states passed the compiled test): the
+    caller certifies what it keeps (a smoothed path, whose certificate then replaces this one's)."""
     rng = rng or np.random.default_rng(0)
     deadline = time.perf_counter() + max_time
     full = start.copy()
@@ -227,6 +230,8 @@ def rrt_connect_shrinking(
                 q[active] = x
                 path.append(q)
             path[0], path[-1] = start.copy(), goal.copy()
+            if not certify:
+                return path, margin
             certified = certify_path(world, path, margin, deadline)
             if certified is not None:
                 return certified, margin
@@ -247,13 +252,15 @@ def rrt_connect_groups(
     step: float = STEP,
     max_time: float = 10.0,
     rng: np.random.Generator | None = None,
+    certify: bool = True,
 ) -> tuple[list[np.ndarray], float] | None:
     """(path, the margin it keeps): one group of joints after the other (an arm moves to its goal while the others
     hold), each by :func:`rrt_connect_shrinking` in its own joints, in the given order and then in the reverse
     order (half the time left each). Two 7-joint searches are much smaller than one 14-joint search: on the real
     body a two-arm cabinet or clutter problem that the joint search did not solve in 6 s was solved in 1-2 s this
     way. The path keeps the smaller of its parts' margins; every edge is certified as in
-    :func:`rrt_connect_shrinking`. None when neither order finds one within ``max_time`` [s]."""
+    :func:`rrt_connect_shrinking` (not without ``certify``). None when neither order finds one within ``max_time``
+    [s]."""
     rng = rng or np.random.default_rng(0)
     deadline = time.perf_counter() + max_time
     orders = (groups, groups[::-1])
@@ -268,7 +275,18 @@ def rrt_connect_groups(
                 continue
             left = max(until - time.perf_counter(), 0.0) / (len(order) - n)  # the later parts get what is not used
             found = rrt_connect_shrinking(
-                world, q, target, moving, lower, upper, margins, shares=shares, step=step, max_time=left, rng=rng
+                world,
+                q,
+                target,
+                moving,
+                lower,
+                upper,
+                margins,
+                shares=shares,
+                step=step,
+                max_time=left,
+                rng=rng,
+                certify=certify,
             )
             if found is None:
                 break
