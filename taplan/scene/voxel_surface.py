@@ -35,7 +35,7 @@ import numpy as np
 __all__ = ["VoxelSurface"]
 
 HALF_DIAGONAL = math.sqrt(3.0) / 2.0
-KNN = 12  # nearest surface centres per sample asked in the exact phase
+KNN = 24  # nearest surface centres per sample asked in the exact phase
 CELL = 3  # voxels per edge of the coarse field's cells (5-10 ms to build for a perceived scene, 1 cm voxels)
 
 
@@ -199,7 +199,7 @@ class VoxelSurface:
         pending = np.flatnonzero(~hit & (lower <= limit) & (upper <= near))
         if len(pending):
             d[pending], p[pending], q[pending], n[pending] = self._exact(
-                starts, ends, radii, pending, points, owner, gap, slack, upper
+                starts, ends, radii, pending, points, owner, gap, nearest, slack, upper
             )
             exact[pending] = True
         pa = p - radii[:, None] * n
@@ -215,6 +215,7 @@ class VoxelSurface:
         points: np.ndarray,
         owner: np.ndarray,
         gap: np.ndarray,
+        nearest: np.ndarray,
         slack: np.ndarray,
         upper: np.ndarray,
     ) -> tuple[np.ndarray, ...]:
@@ -225,6 +226,13 @@ class VoxelSurface:
         h = self.resolution
         want = np.zeros(len(starts), dtype=bool)
         want[rows] = True
+        # a tighter upper bound first: the exact distance to the nearest surface voxel of each of the capsule's
+        # samples (the sample's own gap overstates it by up to the half diagonal and the spacing)
+        mine = np.flatnonzero(want[owner] & (nearest < len(self.surface_lo)))
+        lo = self.surface_lo[nearest[mine]]
+        reach = segment_box_distance(starts[owner[mine]], ends[owner[mine]], lo, lo + h)[0]
+        upper = upper.copy()
+        np.minimum.at(upper, owner[mine], reach)
         radius = upper[owner] + slack[owner]
         ask = np.flatnonzero(want[owner] & (gap <= radius))
         # the KNN nearest centres of each such sample within its radius (arrays, no Python lists); a sample with
