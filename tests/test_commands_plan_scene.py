@@ -104,9 +104,6 @@ def test_a_timing_fallback_is_reported_in_the_plan_and_on_the_command_line(tmp_p
 
     monkeypatch.setattr(motion, "verify_trajectory", refuse_the_first_timing)
     monkeypatch.setattr(motion, "_on_certified_segment", lambda *args: False)  # the straight certificate is not reused
-    # the optimiser's route (this segment is blocked enough to go to the sampler at once, whose smoothed path gets
-    # only its fastest timing: the refusal would drop it for the unsmoothed path instead of a slower timing)
-    monkeypatch.setattr(motion, "SAMPLER_FIRST", 2.0)
     robot = taplan.Robot.teleavatar()
     rows = [robot.home[7:], np.array([-0.694, -1.42, 1.399, -1.306, -0.263, -0.369, -0.403])]  # across the box
     path = tmp_path / "waypoints.csv"

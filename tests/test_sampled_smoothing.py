@@ -252,40 +252,6 @@ def test_the_spline_spreads_a_corner_and_keeps_the_ends(robot: taplan.Robot) -> 
     assert spline_path(lambda a, b: False, path, right) is path
 
 
-def test_a_mostly_blocked_straight_segment_goes_to_the_sampler_at_once(
-    robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """The share of the straight segment's states closer than the margin decides: at or above SAMPLER_FIRST the
-    optimiser is not run before the sampler (the plan is sampled and still certified), below it the optimiser is."""
-    world = _box_on_table(robot)
-    goal = robot.home.copy()
-    goal[robot.group("right").indices] = ACROSS
-    right = np.array(robot.group("right").indices)
-    share = motion._blocked_share(world, robot.home, goal, right, MARGIN)
-    states = robot.home + np.linspace(0, 1, motion.BLOCKED_STATES)[:, None] * (goal - robot.home)
-    expected = np.mean([world.min_distance(q)[0] < MARGIN for q in states])  # the reference: the world's distances
-    assert share == pytest.approx(expected, abs=1e-12) and 0.0 < share < 1.0
-    calls: list[int] = []
-    real = motion.optimize_path
-
-    def recording(*args, **options):  # noqa: ANN002, ANN003, ANN202 (a stand-in)
-        calls.append(1)
-        return real(*args, **options)
-
-    monkeypatch.setattr(motion, "optimize_path", recording)
-    monkeypatch.setattr(motion, "SAMPLER_FIRST", share)  # blocked enough
-    plan = plan_motion(robot, robot.home, goal, world=world, max_time=10.0, seed=0)
-    assert not calls and plan.report.stage == "rrt-connect"
-    index = robot.indices(plan.trajectory.joint_names)
-    for t in np.linspace(0, plan.trajectory.duration, 200):
-        q = robot.home.copy()
-        q[index] = plan.trajectory(t)
-        assert world.min_distance(q)[0] >= MARGIN / 4 - 1e-9
-    monkeypatch.setattr(motion, "SAMPLER_FIRST", share + 1e-6)  # not blocked enough
-    plan_motion(robot, robot.home, goal, world=world, max_time=10.0, seed=0)
-    assert calls
-
-
 def test_the_sampled_path_is_certified_only_when_its_smoothed_path_is_not_used(
     robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
 ) -> None:

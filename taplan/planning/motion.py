@@ -14,8 +14,7 @@
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
    straight line, then from polylines through perturbed midpoints (``"optimization"``; the straight line only, for
-   a quarter of the search time and ``OPTIMIZE_ITERATIONS`` QPs, when the sampler follows, and not at all when
-   ``SAMPLER_FIRST`` of the straight segment is blocked); RRT-Connect
+   a quarter of the search time and ``OPTIMIZE_ITERATIONS`` QPs, when the sampler follows); RRT-Connect
    (:mod:`~taplan.planning.rrt`, exploring with a compiled clearance test; when both arms move, first one arm
    after the other) with shortcutting, then smoothed with the same test (the arms moved together, shortcuts along
    the path, corners blended), resampled evenly and certified again (``"rrt-connect"``); in
@@ -82,15 +81,12 @@ IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
 FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path search leaves this for timing + verify
 SMOOTH_SHARE, SMOOTH_MIN = 0.5, 0.05  # [-, s] a sampled path's smoothing gets this share of the time left, if >= 0.05 s
 OPTIMIZE_SHARE = 0.25  # of the search time, for the optimiser from the straight line when the sampler follows it
-# QPs of that optimiser: on the 39 + 80 benchmark problems it solved 2/3 of those it solves in <= 8 (2-8 QPs,
-# 40-450 ms CPU); those needing more (9-28 QPs, 0.4-2.6 s) and those it never solves go to the sampler, whose
-# smoothed plans take 0.2-0.6 s
-OPTIMIZE_ITERATIONS = 8
-# when at least this share of the straight segment's states is closer than the margin, the sampler follows at once:
-# on the same problems the optimiser needed 7-28 QPs or never succeeded on 11 of the 16 such (0.4-5 s CPU), and
-# 2-6 QPs on the others (75-375 ms; the sampled route takes 0.3-0.6 s)
-SAMPLER_FIRST = 0.45
-BLOCKED_STATES = 41  # states tested along the straight segment (both ends included) for that share
+# QPs of that optimiser: a load-independent bound on a stuck one (on the 39 + 80 benchmark problems it solved all
+# but 3-4 of those it solves at all within 15; the sampled route takes 0.2-0.8 s CPU). A tighter bound (8), and
+# skipping the optimiser when 45 % of the straight segment is blocked, were measured after the optimiser's
+# speed-ups of this session: the same CPU p95 (615-637 ms on the hard set) with longer durations (24 problems
+# sampled with or without it: 40.2 s -> 44.7 s in all), so neither is used
+OPTIMIZE_ITERATIONS = 15
 MARGIN_SHARES = 0.7  # of the time left, for the sampler at each margin but the last (the floor gets the rest)
 GROUPS_SHARE = 0.5  # of the sampler's time, for one arm after the other when both move (then both at once)
 
@@ -209,8 +205,6 @@ def _find_path(
                 # midpoint: the straight line only, for a share of the time and OPTIMIZE_ITERATIONS QPs
                 cap, perturbed = clock + OPTIMIZE_SHARE * max(deadline - clock, 0.0), 0
                 iterations = OPTIMIZE_ITERATIONS
-                if _blocked_share(world, q0, q1, active, margin) >= SAMPLER_FIRST:
-                    cap = clock  # the straight line mostly blocked: the optimiser would likely be stuck
             for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, perturbed, rng):
                 if time.perf_counter() >= cap:
                     break
@@ -269,14 +263,6 @@ def _find_path(
                 return stage, sampled[0], None, sampled[1]
             times["sample"] += time.perf_counter() - clock
     return None
-
-
-def _blocked_share(world: CollisionWorld, q0: np.ndarray, q1: np.ndarray, active: np.ndarray, margin: float) -> float:
-    """The share of ``BLOCKED_STATES`` evenly spaced states of the straight segment that are closer than ``margin``
-    (the sampler's compiled test: about a millisecond)."""
-    check = ClearanceCheck(world, margin, active)
-    states = q0 + np.linspace(0.0, 1.0, BLOCKED_STATES)[:, None] * (q1 - q0)
-    return float(np.mean([not check(q) for q in states]))
 
 
 def _smooth_sampled(
