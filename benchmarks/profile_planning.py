@@ -27,6 +27,12 @@ STAGE_FUNCTIONS = {
     "goal_ik": ("motion.py", "_goal_ik"),
     "straight": ("verify.py", "check_segment"),
     "optimize+smooth": ("optimize.py", "optimize_path"),
+    # inside the optimiser: its batched distance evaluations (with Jacobian rows), the QPs' rows, the QP solves
+    # (calls = SCP iterations), its final certificate
+    "  evaluations": ("optimize.py", "_evaluate"),
+    "  QP rows": ("optimize.py", "_linearised"),
+    "  QP solves": ("solve_qp.py", "solve_qp", "optimize.py", "_sequential_convex"),
+    "  certificate": ("verify.py", "check_segments", "optimize.py", "optimize_path"),
     "sample": ("rrt.py", "rrt_connect_shrinking"),
     "timing (jerk_limited)": ("jerk_limited.py", "jerk_limited"),
     "timing (straight_line)": ("straight.py", "straight_line"),
@@ -36,13 +42,20 @@ STAGE_FUNCTIONS = {
 
 
 def _stage_cpu(stats: pstats.Stats) -> dict[str, tuple[int, float]]:
-    """Calls and cumulative CPU seconds of each stage's function (recursion counted once)."""
+    """Calls and cumulative CPU seconds of each stage's function (recursion counted once); with a caller
+    ``(module, name, caller module, caller name)``: only the calls from that caller."""
     out = {}
-    for stage, (module, name) in STAGE_FUNCTIONS.items():
+    for stage, (module, name, *caller) in STAGE_FUNCTIONS.items():
         calls, seconds = 0, 0.0
-        for (path, _line, function), (_cc, nc, _tt, ct, _callers) in stats.stats.items():  # type: ignore[attr-defined]
-            if function == name and path.endswith(module):
+        for (path, _line, function), (_cc, nc, _tt, ct, callers) in stats.stats.items():  # type: ignore[attr-defined]
+            if function != name or not path.endswith(module):
+                continue
+            if not caller:
                 calls, seconds = calls + nc, seconds + ct
+                continue
+            for (caller_path, _, caller_name), (_ccc, c_nc, _c_tt, c_ct) in callers.items():
+                if caller_name == caller[1] and caller_path.endswith(caller[0]):
+                    calls, seconds = calls + c_nc, seconds + c_ct
         out[stage] = (calls, seconds)
     return out
 
