@@ -461,6 +461,11 @@ def main(argv: list[str] | None = None) -> None:
         "--shard", type=_shard, help="K/N: plan only problems K, K+N, ... (saved to results/shards/ after each)"
     )
     parser.add_argument("--merge", type=int, metavar="N", help="merge the N planning shards into the report")
+    parser.add_argument(
+        "--keep-measurements",
+        action="store_true",
+        help="with --merge: take the fusion and distance rows from the saved results (a --skip-planning run)",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     robot = taplan.Robot.teleavatar()
@@ -478,8 +483,12 @@ def main(argv: list[str] | None = None) -> None:
         return
     repeats = 10 if args.quick else 40
     results: dict[str, Any] = {"load_average": os.getloadavg()[0], "quick": args.quick}
-    results["integration"] = bench_integration(robot, repeats)
-    results["distance"] = bench_distance(robot, repeats * 5)
+    if args.merge and args.keep_measurements:
+        saved = json.loads((_harness.RESULTS_DIR / "perception.json").read_text())["results"]
+        results.update({key: saved[key] for key in ("load_average", "quick", "integration", "distance")})
+    else:
+        results["integration"] = bench_integration(robot, repeats)
+        results["distance"] = bench_distance(robot, repeats * 5)
     note = f"Load average {results['load_average']:.1f} on {os.cpu_count()} cores at the start."
 
     def partial(rows: list[dict[str, Any]]) -> None:  # results so far, saved after every problem
