@@ -225,39 +225,17 @@ def _find_path(
         else:
             margins = _margins(margin, floor)
             shares = (MARGIN_SHARES,) * (len(margins) - 1)
+            bounds = (limits.lower, limits.upper, margins)
+            options: dict[str, Any] = {"shares": shares, "rng": rng, "certify": certify}  # the same for both searches
             groups = [np.intersect1d(g.indices, active) for g in world.robot.groups.values()]
             groups = [g for g in groups if g.size]
             sampled = None
             if len(groups) > 1 and sum(g.size for g in groups) == active.size:  # both arms: one, then the other
                 left = GROUPS_SHARE * max(deadline - time.perf_counter(), 0.0)
-                sampled = rrt_connect_groups(
-                    world,
-                    q0,
-                    q1,
-                    groups,
-                    limits.lower,
-                    limits.upper,
-                    margins,
-                    shares=shares,
-                    max_time=left,
-                    rng=rng,
-                    certify=certify,
-                )
+                sampled = rrt_connect_groups(world, q0, q1, groups, *bounds, max_time=left, **options)
             if sampled is None:
                 left = max(deadline - time.perf_counter(), 0.0)
-                sampled = rrt_connect_shrinking(
-                    world,
-                    q0,
-                    q1,
-                    active,
-                    limits.lower,
-                    limits.upper,
-                    margins,
-                    shares=shares,
-                    max_time=left,
-                    rng=rng,
-                    certify=certify,
-                )
+                sampled = rrt_connect_shrinking(world, q0, q1, active, *bounds, max_time=left, **options)
             if sampled is not None:
                 times["sample"] += time.perf_counter() - clock
                 return stage, sampled[0], None, sampled[1]
