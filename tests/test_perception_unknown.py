@@ -5,30 +5,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from board_helpers import BOARD_CENTRE, BOARD_SIZE, SMALL, WORKSPACE, board_scene
 
 import taplan
 from taplan.errors import InvalidInputError
 from taplan.planning.verify import check_segment
 from taplan.scene import Box, CollisionWorld, Perception, Scene
-from taplan.scene.camera import PinholeCamera, look_at
+from taplan.scene.camera import look_at
 from taplan.scene.occupancy import OccupancyGrid
 from taplan.scene.raycast import render_depth
-
-SMALL = PinholeCamera(160, 120, 84.25, 84.25, 80.0, 60.0)  # the wrist camera's field of view at 1/4 resolution
-BOARD_CENTRE = np.array([0.65, 0.0, -0.35])  # below the hands at home
-BOARD_SIZE = (0.35, 0.5, 0.02)
-WORKSPACE = ((0.3, -0.45, -0.6), (1.0, 0.45, -0.1))  # around the board (smaller than the default: faster tests)
 
 
 @pytest.fixture(scope="module")
 def robot() -> taplan.Robot:
     return taplan.Robot.teleavatar()
-
-
-def _board_scene() -> Scene:
-    scene = Scene()
-    scene.add("board", Box(BOARD_SIZE), (BOARD_CENTRE.tolist(), [0, 0, 0, 1]))
-    return scene
 
 
 def _board_points(step: float = 0.005) -> np.ndarray:
@@ -54,7 +44,7 @@ def _edge_on(robot: taplan.Robot, unknown: str) -> Perception:
     """The board seen from its own height: only its 2 cm front edge is visible."""
     perception = Perception(robot, resolution=0.01, unknown=unknown, workspace=WORKSPACE)
     T = look_at([0.1, 0.0, -0.35], [1.0, 0.0, -0.35])
-    depth = render_depth(SMALL, T, _board_scene(), noise=0.001, missing=0.02, rng=0)
+    depth = render_depth(SMALL, T, board_scene(), noise=0.001, missing=0.02, rng=0)
     perception.integrate_depth(depth, SMALL, T_root_camera=T, q=robot.home)
     perception.update_scene()
     return perception
@@ -115,7 +105,7 @@ def test_a_board_seen_in_part_blocks_the_part_no_camera_viewed(robot: taplan.Rob
     """A view from above that holds only the board's left half: the right half was never viewed and blocks."""
     points = _board_points()
     T = look_at([0.65, 0.2, -0.2], [0.65, 0.2, -0.35])  # 15 cm over the left end, looking down
-    depth = render_depth(SMALL, T, _board_scene())
+    depth = render_depth(SMALL, T, board_scene())
     for unknown, expect_all in (("free", False), ("occluded", True)):
         perception = Perception(robot, resolution=0.01, unknown=unknown, workspace=WORKSPACE)
         perception.integrate_depth(depth, SMALL, T_root_camera=T, q=robot.home)
@@ -130,7 +120,7 @@ def test_a_plan_in_an_edge_on_perceived_board_stays_off_the_true_board(robot: ta
     check, independent of the voxels)."""
     from taplan.planning import plan_motion
 
-    truth = CollisionWorld(robot, _board_scene())
+    truth = CollisionWorld(robot, board_scene())
     loose = CollisionWorld(robot, _edge_on(robot, "free").scene)
     perception = _edge_on(robot, "occluded")
     rng = np.random.default_rng(11)

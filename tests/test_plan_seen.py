@@ -8,6 +8,7 @@ from __future__ import annotations
 import coal
 import numpy as np
 import pytest
+from board_helpers import BOARD_CENTRE, BOARD_SIZE, SMALL, WORKSPACE, board_scene
 
 import taplan
 from taplan.errors import InvalidInputError, UnseenSpaceError
@@ -18,21 +19,10 @@ from taplan.scene import Box, CollisionWorld, Perception, Scene
 from taplan.scene.camera import PinholeCamera
 from taplan.scene.scan import RenderedViews
 
-SMALL = PinholeCamera(160, 120, 84.25, 84.25, 80.0, 60.0)  # the wrist camera's field of view at 1/4 resolution
-BOARD_CENTRE = np.array([0.65, 0.0, -0.35])  # below the hands at home
-BOARD_SIZE = (0.35, 0.5, 0.02)
-WORKSPACE = ((0.3, -0.45, -0.6), (1.0, 0.45, -0.1))  # around the board (smaller than the default: faster tests)
-
 
 @pytest.fixture(scope="module")
 def robot() -> taplan.Robot:
     return taplan.Robot.teleavatar()
-
-
-def _board_scene() -> Scene:
-    scene = Scene()
-    scene.add("board", Box(BOARD_SIZE), (BOARD_CENTRE.tolist(), [0, 0, 0, 1]))
-    return scene
 
 
 UNSEEN = ((0.45, -0.3, -0.4), (0.85, 0.3, -0.3))  # [m] the box around the board no image has seen yet
@@ -56,7 +46,7 @@ def _seen_but_the_board(robot: taplan.Robot, unknown: str = "occluded") -> Perce
 def _through_the_board(robot: taplan.Robot) -> list[np.ndarray]:
     """A seeded left-arm motion whose straight segment goes through the true board, with ends clear of it and of
     the unseen box."""
-    truth = CollisionWorld(robot, _board_scene())
+    truth = CollisionWorld(robot, board_scene())
     unseen = CollisionWorld(robot, _seen_but_the_board(robot).scene)
     rng = np.random.default_rng(11)
     limits = robot.planning_limits
@@ -103,7 +93,7 @@ def test_the_loop_looks_at_the_unseen_board_and_plans_around_it(robot: taplan.Ro
     board = np.stack(np.meshgrid(*[np.linspace(-h, h, 15) for h in half], indexing="ij"), -1).reshape(-1, 3)
     board_voxels, inside = perception.grid.keys(board + BOARD_CENTRE)
     assert inside.all() and not perception.grid.occupied[board_voxels].any()  # the board is not seen
-    capture = RenderedViews(perception, _board_scene(), camera=SMALL, seed=0)
+    capture = RenderedViews(perception, board_scene(), camera=SMALL, seed=0)
     seen = plan_seen(robot, perception, start, goal, capture, camera=SMALL, max_time=20.0, seed=0)
     assert seen.rounds and seen.rounds[0].views and capture.count == len(seen.views) > 0
     assert perception.grid.occupied[board_voxels].any()  # a view saw the board
@@ -120,7 +110,7 @@ def test_the_loop_looks_at_the_unseen_board_and_plans_around_it(robot: taplan.Ro
 def _goal_in_unseen(robot: taplan.Robot, perception: Perception) -> np.ndarray:
     """A seeded left-arm configuration clear of the true board whose gripper reaches 1 cm into counted unknown
     space."""
-    truth = CollisionWorld(robot, _board_scene())
+    truth = CollisionWorld(robot, board_scene())
     unseen = CollisionWorld(robot, perception.scene)
     rng = np.random.default_rng(5)
     limits = robot.planning_limits
@@ -137,7 +127,7 @@ def test_a_goal_in_unseen_space_is_looked_at_before_planning(robot: taplan.Robot
     perception = _seen_but_the_board(robot)
     start, goal = robot.home, _goal_in_unseen(robot, perception)
     unseen = _swept_unknown(perception, goal[None, :], 0.02)
-    capture = RenderedViews(perception, _board_scene(), camera=SMALL, seed=1)
+    capture = RenderedViews(perception, board_scene(), camera=SMALL, seed=1)
     seen = plan_seen(robot, perception, start, goal, capture, camera=SMALL, max_time=20.0, seed=1)
     first = seen.rounds[0]
     assert first.plan_time == 0.0 and first.views  # views before any plan
