@@ -168,6 +168,9 @@ def test_plan_seen_checks_its_arguments(robot: taplan.Robot) -> None:
         plan_seen(robot, perception, start, goal, "camera")
     with pytest.raises(InvalidInputError, match="rounds"):
         plan_seen(robot, perception, start, goal, lambda f, q: None, rounds=-1)
+    for name, bad in (("views_per_round", 0), ("samples", 2.5), ("aimed", -1), ("aimed", True)):
+        with pytest.raises(InvalidInputError, match=f"{name}.*whole number"):
+            plan_seen(robot, perception, start, goal, lambda f, q: None, **{name: bad})
 
 
 def test_a_view_into_nothing_unshadows_only_from_known_space_and_not_behind_the_robot() -> None:

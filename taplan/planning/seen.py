@@ -246,9 +246,14 @@ def plan_seen(
         )
     if not callable(capture):
         raise InvalidInputError("capture", capture, "a callable (camera frame, configuration) -> (depth, camera)")
-    for name, value in (("rounds", rounds), ("views_per_round", views_per_round), ("samples", samples)):
-        if not (isinstance(value, int) and value >= (0 if name == "rounds" else 1)):
-            raise InvalidInputError(name, value, "a whole number >= 1" if name != "rounds" else "a whole number >= 0")
+    for name, value, least in (
+        ("rounds", rounds, 0),
+        ("views_per_round", views_per_round, 1),
+        ("samples", samples, 1),
+        ("aimed", aimed, 0),
+    ):
+        if not (isinstance(value, int) and not isinstance(value, bool) and value >= least):
+            raise InvalidInputError(name, value, f"a whole number >= {least}")
     q0 = robot.check_configuration(start, "start")
     perception.mark_robot_free(q0)  # the robot stands there: nothing else does
     perception.update_scene()
