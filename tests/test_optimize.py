@@ -125,3 +125,48 @@ def test_skipping_the_contained_trust_regions_gives_the_same_path(robot, monkeyp
     assert skipping is not None and halving is not None
     np.testing.assert_allclose(skipping.path, halving.path, rtol=0, atol=1e-9)  # [rad]
     assert skipped_solves < len(solves)  # the same path with fewer QPs
+
+
+def _dense_clearance(world: CollisionWorld, path: np.ndarray, per_segment: int = 20) -> float:
+    """The smallest distance [m] at ``per_segment`` evenly spaced points of every segment of ``path``."""
+    fractions = np.linspace(0.0, 1.0, per_segment + 1)
+    points = [a + f * (b - a) for a, b in zip(path[:-1], path[1:], strict=True) for f in fractions]
+    return min(world.min_distance(q)[0] for q in points)
+
+
+def test_slacks_only_for_the_violated_rows_give_the_same_path_with_smaller_qps(robot, monkeypatch) -> None:
+    from benchmarks._scenes import problems
+
+    [problem] = problems(1, 3, families=("cubby",))  # two arms, starts deep in collision, then keeps the target
+    world = CollisionWorld(robot, problem.scene)
+    start, goal = problem.start, problem.goal_q
+    active = np.flatnonzero(np.abs(goal - start) > 1e-12)
+    limits = robot.planning_limits
+    sizes: list[int] = []
+    original_solve = optimize_module.qpsolvers.solve_qp
+
+    def sized(P, *args, **kwargs):
+        sizes.append(P.shape[0])
+        return original_solve(P, *args, **kwargs)
+
+    monkeypatch.setattr(optimize_module.qpsolvers, "solve_qp", sized)
+    soft = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    soft_sizes = list(sizes)
+    sizes.clear()
+    monkeypatch.setattr(optimize_module, "_soft_rows", lambda G_x, h, x: np.arange(G_x.shape[0]))  # every row
+    every = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    assert soft is not None and every is not None
+    length = [float(np.linalg.norm(np.diff(r.path, axis=0), axis=1).sum()) for r in (soft, every)]
+    assert abs(length[0] - length[1]) <= 0.01 * length[1]  # [rad] the same path to 1 % of its length
+    assert _dense_clearance(world, soft.path) >= MARGIN / 2  # certified: keeps half the margin between waypoints
+    assert np.mean(soft_sizes) < 0.8 * np.mean(every_sizes := sizes)  # fewer QP variables
+    assert len(every_sizes) > 0
+
+
+def test_soft_rows_are_the_rows_the_current_path_violates() -> None:
+    from taplan.planning.optimize import _soft_rows
+
+    G = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    h = np.array([0.5, 2.0, 1.0])
+    np.testing.assert_array_equal(_soft_rows(G, h, np.array([1.0, 1.0])), [0, 2])  # 1 > 0.5, 2 > 1
+    np.testing.assert_array_equal(_soft_rows(G, h, np.array([0.0, 0.0])), [])

