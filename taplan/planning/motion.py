@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from taplan._threads import run_single_threaded
 from taplan.errors import InvalidInputError, PlanningError, TaplanError, TimingError
 from taplan.limits import JointLimits
 from taplan.planning.compiled_check import ClearanceCheck
@@ -657,6 +658,7 @@ def _check_budget(max_time: Any) -> float:
     return float(max_time)
 
 
+@run_single_threaded  # small arrays: BLAS/OpenMP worker threads cost more than they save (taplan._threads)
 def plan_motion(
     robot: Robot,
     start: npt.ArrayLike,
