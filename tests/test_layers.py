@@ -19,6 +19,7 @@ LAYERS = (
     (
         "errors",
         "_validation",
+        "_threads",
         "limits",
         "trajectory",
         "io",
