@@ -9,7 +9,8 @@
    configuration and seeded random configurations; solutions closer than ``floor`` are rejected. The start seed's
    solution wins when it is clear of ``margin`` (IK from the start converges to a solution near it: one solve
    instead of three); else the one closest to the start (joint space) among those clear of ``margin`` (else among
-   those clear of ``floor``).
+   those clear of ``floor``). One short attempt per seed first; restarts only when every seed failed
+   (``GOAL_IK_ITERATIONS``, ``GOAL_IK_SEEDS``, ``GOAL_IK_RESTARTS``).
    None: :class:`~taplan.errors.PlanningError` naming the target.
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
@@ -79,6 +80,11 @@ SMOOTH_STEP = 0.1  # [rad] waypoint spacing (Euclidean) of a smoothed sampled pa
 TIMING_POINTS = 4
 BUDGET_TOLERANCE = 0.2  # [s] documented overrun of max_time: one indivisible step (an IK solve, a QP, a timing)
 IK_SHARE = 0.5  # the goal IK stops trying seeds after this share of the budget
+# The goal IK's first round: one attempt per seed (no restarts inside solve_pose), stopped after this many iterations
+# (converging attempts take 3-15; a stuck one ran 100: 24 ms), and ended once a clear solution is in hand and this
+# many seeds were tried (start, home, one random). Only when no seed gave a solution, a second round gives every
+# seed GOAL_IK_RESTARTS restarts and the full iterations (what every seed got before: divider goals 30-60 -> 6-13 ms).
+GOAL_IK_ITERATIONS, GOAL_IK_SEEDS, GOAL_IK_RESTARTS = 30, 3, 2
 FINISH_SHARE, FINISH_MIN, FINISH_MAX = 0.35, 0.05, 2.0  # [-, s, s] the path search leaves this for timing + verify
 SMOOTH_SHARE, SMOOTH_MIN = 0.5, 0.05  # [-, s] a sampled path's smoothing gets this share of the time left, if >= 0.05 s
 OPTIMIZE_SHARE = 0.25  # of the search time, for the optimiser from the straight line when the sampler follows it
@@ -317,7 +323,9 @@ def _goal_ik(
 ) -> np.ndarray:
     """The start seed's goal IK solution when it is at least ``margin`` from everything, else the one closest to the
     start among those at least ``margin`` away, else among those at least ``floor`` (their plans approach them along
-    a certified segment); seeds stop at ``deadline``."""
+    a certified segment); seeds stop at ``deadline``. A first round gives each seed one short attempt and ends once
+    ``GOAL_IK_SEEDS`` seeds were tried and one gave a clear solution; a second round (only when no seed gave any)
+    gives each seed ``GOAL_IK_RESTARTS`` random restarts."""
     from taplan.ik.solve_pose import solve_pose
 
     lower, upper = limits.lower, limits.upper
@@ -327,26 +335,34 @@ def _goal_ik(
     reason = "no IK solution within 1 mm / 0.01 rad"
     closest = (np.inf, np.inf)  # the best failed IK's position [m] and orientation [rad] error
     moving = np.isin(np.arange(robot.nq), _moving_joints(robot, targets))
-    for k, seed_q in enumerate(candidates):
-        if time.perf_counter() >= deadline:
-            reason = f"the goal IK's share of the time budget ran out after {k} seeds"
+    rounds = ((0, GOAL_IK_ITERATIONS), (GOAL_IK_RESTARTS, 100))  # (restarts, iterations per attempt)
+    for restarts, iterations in rounds:
+        for k, seed_q in enumerate(candidates):
+            if True in best and k >= GOAL_IK_SEEDS:
+                break  # warm start: a clear solution, and the start, home and a random seed were tried
+            if time.perf_counter() >= deadline:
+                reason = f"the goal IK's share of the time budget ran out after {k} seeds"
+                break
+            seed_q = np.where(moving, seed_q, start)
+            result = solve_pose(
+                robot, targets, seed_q, limits=limits, restarts=restarts, seed=k, max_iterations=iterations
+            )
+            if not result.success:
+                position, orientation = result.position_error.values(), result.orientation_error.values()
+                closest = min(closest, (max(position, default=0.0), max(orientation, default=0.0)))
+                continue
+            d, pair = world.min_distance(result.q)
+            if d < floor:
+                reason = f"IK solutions collide ({pair[0]} / {pair[1]}: {d * 1e3:.1f} mm, {floor * 1e3:.1f} mm needed)"
+                continue
+            clear = d >= margin
+            distance = float(np.linalg.norm(result.q - start))
+            if distance < cost[clear]:
+                best[clear], cost[clear] = result.q, distance
+            if clear and k == 0:
+                break  # warm start: the start seed's clear solution
+        if best or time.perf_counter() >= deadline:
             break
-        seed_q = np.where(moving, seed_q, start)
-        result = solve_pose(robot, targets, seed_q, limits=limits, restarts=2, seed=k)
-        if not result.success:
-            position, orientation = result.position_error.values(), result.orientation_error.values()
-            closest = min(closest, (max(position, default=0.0), max(orientation, default=0.0)))
-            continue
-        d, pair = world.min_distance(result.q)
-        if d < floor:
-            reason = f"IK solutions collide ({pair[0]} / {pair[1]}: {d * 1e3:.1f} mm, {floor * 1e3:.1f} mm needed)"
-            continue
-        clear = d >= margin
-        distance = float(np.linalg.norm(result.q - start))
-        if distance < cost[clear]:
-            best[clear], cost[clear] = result.q, distance
-        if True in best and k in (0, 2):
-            break  # warm start: the start seed's clear solution, or the start and home seeds were tried
     if not best:
         if reason.startswith("no IK solution") and np.isfinite(closest[0]):
             reason += f"; the closest ends {closest[0] * 1e3:.1f} mm / {closest[1]:.3f} rad from the target"
