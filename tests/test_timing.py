@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -300,3 +302,48 @@ def test_position_range_of_high_degree_pieces_is_exact() -> None:
         )
         assert np.all(low <= samples.min(axis=0) + 1e-9) and np.all(high >= samples.max(axis=0) - 1e-9)
         assert np.all(samples.min(axis=0) - low < 1e-5) and np.all(high - samples.max(axis=0) < 1e-5)
+
+
+@pytest.mark.parametrize(("count", "seed"), [(12, 3), (25, 7), (30, 2)])
+def test_jerk_limited_skips_a_path_filter_that_cannot_beat_the_joint_method(
+    arm_limits: taplan.JointLimits, count: int, seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The path filter is stopped once its lower bound (a round's TOPP-RA duration plus the narrowest width) reaches
+    the joint method's duration: jerk_limited returns what comparing with the whole path filter returns."""
+    import sys
+
+    from taplan.timing.toppra_retime import as_path
+
+    module = sys.modules["taplan.timing.jerk_limited"]
+    q = random_walk(arm_limits, count, seed)
+    path, _, _ = as_path(q, arm_limits.size)
+    factors, repairs = module.DEFAULT_WIDTH_FACTORS, module.DEFAULT_REPAIRS
+    solves: list[float] = []
+    profile = module.time_optimal_profile
+
+    def counted(*args: object, **kwargs: object) -> object:
+        out = profile(*args, **kwargs)
+        solves.append(out.duration)
+        return out
+
+    monkeypatch.setattr(module, "time_optimal_profile", counted)
+    stopped = 0
+    for max_deviation in (0.02, 0.01, 0.005):
+        joint, _ = module._joint_filter(path, arm_limits, max_deviation, 16, None)
+        solves.clear()
+        whole = module._path_filter(path, arm_limits, factors, 1.0, repairs, 16, None)
+        whole_solves = len(solves)
+        expected = joint if joint is not None and joint.trajectory.duration <= whole.trajectory.duration else whole
+        result = jerk_limited(q, arm_limits, max_deviation=max_deviation)
+        assert result.method == expected.method
+        assert result.trajectory.duration == pytest.approx(expected.trajectory.duration, abs=1e-12)
+        np.testing.assert_allclose(result.trajectory.coefficients, expected.trajectory.coefficients, atol=1e-12)
+        beat = math.inf if joint is None else joint.trajectory.duration
+        solves.clear()
+        cut = module._path_filter(path, arm_limits, factors, 1.0, repairs, 16, None, beat)
+        if cut is None or cut.trajectory.duration >= beat:  # it cannot win: stopped, fewer TOPP-RA solves
+            stopped += 1
+            assert whole.trajectory.duration >= beat and len(solves) < whole_solves
+        else:
+            assert cut.trajectory.duration == pytest.approx(whole.trajectory.duration, abs=1e-12)
+    assert stopped >= 1  # the bound ends the path filter early on these paths
