@@ -117,3 +117,52 @@ def test_an_uncertified_interval_is_split_into_the_pieces_its_closest_pair_needs
         inner = pieces[1:]
         np.testing.assert_allclose(d_lo[inner, 0], 0.02 + lo[inner], atol=1e-15)
     assert len(seen) == 1  # every new point in one evaluation
+
+
+def test_later_levels_evaluate_only_the_pairs_not_yet_certified_and_stay_sound(
+    robot, world, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A certificate's later levels evaluate only the pairs some interval still needs: the same verdicts as
+    evaluating every pair, far fewer pair evaluations, and sound by dense sampling with coal (no engine)."""
+    starts, ends = _segments(robot, world, 12)
+    reference = CollisionWorld(robot, world.scene, engine=False)
+    limits = robot.planning_limits
+    paths = [np.array([a, (a + b) / 2 + 0.1, b]) for a, b in zip(starts[:6], ends[:6], strict=True)]
+    trajectories = [jerk_limited(path, limits).trajectory for path in paths]
+    evaluated = {"subset": 0, "full": 0}
+    pair_distances, distance_matrix = world.pair_distances, world.distance_matrix
+
+    def counted_subset(Q: np.ndarray, pairs: tuple, **kwargs: object) -> np.ndarray | None:
+        out = pair_distances(Q, pairs, **kwargs)
+        evaluated["subset"] += 0 if out is None else out.size
+        return out
+
+    def counted_full(Q: np.ndarray, **kwargs: object) -> object:
+        out = distance_matrix(Q, **kwargs)
+        evaluated["full"] += out.distance.size
+        return out
+
+    def run() -> tuple[list[bool], list[bool]]:
+        segments = [c.valid for c in check_segments(world, starts, ends, MARGIN)]
+        timed = [verify_trajectory(world, t, floor=MARGIN / 4).collision_free for t in trajectories]
+        return segments, timed
+
+    monkeypatch.setattr(world, "distance_matrix", counted_full)
+    monkeypatch.setattr(world, "pair_distances", counted_subset)
+    subset = run()
+    with_subsets = dict(evaluated)
+    monkeypatch.setattr(world, "pair_distances", lambda *args, **kwargs: None)  # every level evaluates every pair
+    evaluated.update(subset=0, full=0)
+    full = run()
+    assert subset == full
+    assert any(subset[0]) and not all(subset[0]) and any(subset[1])
+    assert with_subsets["subset"] > 0
+    assert with_subsets["subset"] + with_subsets["full"] < 0.75 * evaluated["full"]
+    for (a, b), valid in zip(zip(starts, ends, strict=True), subset[0], strict=True):
+        if valid:
+            lowest = min(reference.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 301))
+            assert lowest >= MARGIN / 2 - 1e-9
+    for trajectory, valid in zip(trajectories, subset[1], strict=True):
+        if valid:
+            lowest = min(reference.min_distance(trajectory(t))[0] for t in np.linspace(0, trajectory.duration, 601))
+            assert lowest > MARGIN / 4 - 1e-9

@@ -313,3 +313,46 @@ def test_worlds_sharing_the_compiled_kernel_across_threads(robot: taplan.Robot) 
     for t in threads:
         t.join()
     assert not failures
+
+
+@pytest.mark.parametrize(("seed", "bound_beyond"), [(0, np.inf), (1, 0.1), (2, 0.02)])
+def test_distances_of_a_subset_equal_the_full_batch(robot: taplan.Robot, seed: int, bound_beyond: float) -> None:
+    """Every shape, perceived occupancy and penetrating configurations: the subset's distances are the full batch's
+    columns (the same closed forms, bounds and coal cases), in any order, repeated or not."""
+    scene = _full_scene(seed, attached=False)
+    world = CollisionWorld(robot, scene)
+    engine = world.engine()
+    Q = _configurations(robot, 25, seed)
+    full = engine.evaluate(Q, jacobian=False, bound_beyond=bound_beyond)
+    assert full.pairs == tuple(engine.pair_names)
+    rng = np.random.default_rng(seed)
+    columns = rng.choice(len(full.pairs), 120, replace=True)
+    columns[:2] = [0, len(full.pairs) - 1]  # a robot pair and an occupancy pair (the last obstacle)
+    got = engine.distances_of(Q, columns, bound_beyond=bound_beyond)
+    field = np.array([full.pairs[k][1] == "seen" for k in columns])
+    assert field.any() and (~field).any()
+    np.testing.assert_allclose(got[:, ~field], full.distance[:, columns[~field]], rtol=0, atol=1e-12)
+    assert np.any(full.distance[:, columns] < 0.0)  # penetrations (coal's EPA) were among them
+    # the occupancy's far capsules get a lower bound from its voxel surface, which depends on the batch: a lower
+    # bound of the exact distance, and the exact distance itself within bound_beyond
+    exact = engine.evaluate(Q, jacobian=False).distance[:, columns[field]]
+    assert np.all(got[:, field] <= exact + 1e-12)
+    near = exact <= bound_beyond
+    np.testing.assert_allclose(got[:, field][near], exact[near], rtol=0, atol=1e-9)
+    names = tuple(full.pairs[k] for k in columns)
+    np.testing.assert_allclose(world.pair_distances(Q, names, bound_beyond=bound_beyond), got, rtol=0, atol=0)
+
+
+def test_pair_distances_leave_attached_pairs_to_the_full_batch(robot: taplan.Robot) -> None:
+    scene = _scene(0)
+    scene.attach("tool", Cylinder(0.03, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    Q = _configurations(robot, 4, 3)
+    matrix = world.distance_matrix(Q)
+    robot_pair = matrix.pairs[0]
+    tool_pair = next(pair for pair in matrix.pairs if pair[0] == "tool")
+    got = world.pair_distances(Q, (robot_pair,))
+    assert got is not None
+    np.testing.assert_allclose(got[:, 0], matrix.distance[:, 0], rtol=0, atol=1e-12)
+    assert world.pair_distances(Q, (robot_pair, tool_pair)) is None
+    assert CollisionWorld(robot, scene, engine=False).pair_distances(Q, (robot_pair,)) is None

@@ -16,6 +16,7 @@ certificate costs a handful of batched evaluations instead of one distance query
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -205,8 +206,17 @@ def _certify_batch(
             valid[curve[low < required]] = False
         return d
 
-    def evaluate(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
-        batch = world.distance_matrix(configurations(curve, s), bound_beyond=BOUND_BEYOND)
+    def evaluate(curve: np.ndarray, s: np.ndarray, needed: np.ndarray | None = None) -> np.ndarray:
+        """Distances at the parameters: every pair, or only the columns ``needed`` (the others +inf: certified on
+        every interval being split, so on each of its pieces) where the world evaluates a subset."""
+        Q = configurations(curve, s)
+        if needed is not None:
+            names = list(columns)
+            pairs = tuple(names[k] for k in needed.tolist())
+            distance = world.pair_distances(Q, pairs, bound_beyond=BOUND_BEYOND)
+            if distance is not None:
+                return record(curve, s, pairs, distance, travel[needed])
+        batch = world.distance_matrix(Q, bound_beyond=BOUND_BEYOND)
         return record(curve, s, batch.pairs, batch.distance, batch.travel)
 
     curve = np.concatenate([np.full(len(g), k) for k, g in enumerate(grids)])
@@ -228,13 +238,19 @@ def _certify_batch(
         d_a, d_b = _pad(d_a, P), _pad(d_b, P)
         r = rate(i_curve, a, b, travel)
         lower = (d_a + d_b - r * (b - a)[:, None]) / 2
-        clear = np.all(lower > floor if strict else lower >= floor, axis=1)
+        certified = lower > floor if strict else lower >= floor  # (I, P)
+        clear = np.all(certified, axis=1)
         fail = ~clear & (b - a >= shortest)
         valid[i_curve[~clear & ~fail]] = False  # too short to split further and still not certified
         i_curve, a, b, d_a, d_b, r = i_curve[fail], a[fail], b[fail], d_a[fail], d_b[fail], r[fail]
         if not len(i_curve):
             break
-        i_curve, a, b, d_a, d_b = _split(i_curve, a, b, d_a, d_b, r, floor, evaluate, len(columns))
+        # only the pairs not certified on some interval are evaluated at the new points: every other pair keeps its
+        # bound on each interval being split, so on each of its pieces (+inf there: nothing more to certify)
+        needed = np.flatnonzero(~np.all(certified[fail], axis=0))
+        i_curve, a, b, d_a, d_b = _split(
+            i_curve, a, b, d_a, d_b, r, floor, functools.partial(evaluate, needed=needed), len(columns)
+        )
     return [(bool(valid[k]), float(lowest[k]), pair[k], float(where[k]), int(evaluations[k])) for k in range(count)]
 
 

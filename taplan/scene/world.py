@@ -443,6 +443,24 @@ class CollisionWorld:
             self._engine = DistanceEngine(self)
         return self._engine
 
+    def pair_distances(
+        self, configurations: npt.ArrayLike, pairs: tuple[tuple[str, str], ...], *, bound_beyond: float = math.inf
+    ) -> np.ndarray | None:
+        """The distances (N, K) [m] of the named ``pairs`` (as :meth:`distance_matrix` names them) at N
+        configurations (N, nq), as :meth:`distance_matrix` reports them (to rounding), without evaluating the other
+        pairs; None where only :meth:`distance_matrix` answers (no engine, a pair of an attached object, non-finite
+        configurations). For a certificate's later levels, which need only the pairs not yet certified."""
+        Q = np.asarray(configurations, dtype=float)
+        if Q.ndim != 2 or Q.shape[1] != self.model.nq:
+            raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
+        engine = self.engine()
+        if engine is None or not np.all(np.isfinite(Q)):
+            return None
+        columns = engine.columns_of(tuple(pairs))
+        if columns is None:
+            return None
+        return engine.distances_of(Q, columns, bound_beyond=bound_beyond)
+
     def distance_matrix(self, configurations: npt.ArrayLike, *, bound_beyond: float = math.inf) -> Any:
         """Every pair (no cutoff) at N configurations (N, nq) as one :class:`~taplan.scene.engine.BatchDistances`
         without Jacobians: the engine's batch where it applies (scenes without attached objects), else the pairs of
