@@ -170,3 +170,49 @@ def test_soft_rows_are_the_rows_the_current_path_violates() -> None:
     h = np.array([0.5, 2.0, 1.0])
     np.testing.assert_array_equal(_soft_rows(G, h, np.array([1.0, 1.0])), [0, 2])  # 1 > 0.5, 2 > 1
     np.testing.assert_array_equal(_soft_rows(G, h, np.array([0.0, 0.0])), [])
+
+
+def test_stalled_is_a_violation_that_stops_falling() -> None:
+    from taplan.planning.optimize import STALL_FLOOR, STALL_WINDOW, _stalled
+
+    assert not _stalled([2.0] * STALL_WINDOW)  # too few QPs to tell [m]
+    assert _stalled([2.0] + [1.5] * STALL_WINDOW)  # fell by a quarter over the window
+    assert not _stalled([2.0] + [0.9] * STALL_WINDOW)  # fell by more than half
+    assert not _stalled([STALL_FLOOR] * (STALL_WINDOW + 1))  # nearly clear: left to finish
+
+
+def _solves(monkeypatch) -> list[int]:
+    solves: list[int] = []
+    original_solve = optimize_module.qpsolvers.solve_qp
+
+    def counted(*args, **kwargs):
+        solves.append(1)
+        return original_solve(*args, **kwargs)
+
+    monkeypatch.setattr(optimize_module.qpsolvers, "solve_qp", counted)
+    return solves
+
+
+def test_giving_up_a_stalled_optimisation_stops_early_and_leaves_a_converging_one_alone(robot, monkeypatch) -> None:
+    from benchmarks._scenes import problems
+    from taplan.planning.optimize import STALL_WINDOW
+
+    limits = robot.planning_limits
+    solves = _solves(monkeypatch)
+    [stuck] = problems(1, 0, families=("table",))  # the straight line's optimisation stays in the table
+    world = CollisionWorld(robot, stuck.scene)
+    seed = np.array([stuck.start, stuck.goal_q])
+    active = np.flatnonzero(np.abs(stuck.goal_q - stuck.start) > 1e-12)
+    given_up = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True)
+    assert given_up is None and len(solves) <= STALL_WINDOW + 3
+    solves.clear()
+    assert optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, max_iterations=12) is None
+    assert len(solves) == 12  # without the rule it keeps trying
+    [clear] = problems(1, 3, families=("cubby",))  # deep in collision at first, then clear
+    world = CollisionWorld(robot, clear.scene)
+    seed = np.array([clear.start, clear.goal_q])
+    active = np.flatnonzero(np.abs(clear.goal_q - clear.start) > 1e-12)
+    kept = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True)
+    plain = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
+    assert kept is not None and plain is not None
+    np.testing.assert_array_equal(kept.path, plain.path)  # [rad]

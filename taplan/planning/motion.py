@@ -15,7 +15,8 @@
 3. **Path**, the first of ``stages`` that finds one: the straight joint-space segment when it is certified free
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
    straight line, then from polylines through perturbed midpoints (``"optimization"``; the straight line only, for
-   a quarter of the search time and ``OPTIMIZE_ITERATIONS`` QPs, when the sampler follows); RRT-Connect
+   a quarter of the search time and ``OPTIMIZE_ITERATIONS`` QPs, when the sampler follows, and given up when it
+   stalls in collision: :data:`~taplan.planning.optimize.STALL_WINDOW`); RRT-Connect
    (:mod:`~taplan.planning.rrt`, exploring with a compiled clearance test; when both arms move, first one arm
    after the other) with shortcutting, then smoothed with the same test (the arms moved together, shortcuts along
    the path, corners blended), resampled evenly and certified again (``"rrt-connect"``); in
@@ -205,13 +206,13 @@ def _find_path(
             if certificate.valid:
                 return stage, [q0, q1], certificate, margin
         elif stage == "optimization":
-            cap, perturbed, iterations = deadline, PERTURBED_SEEDS, 30
+            cap, perturbed, iterations, sampler_follows = deadline, PERTURBED_SEEDS, 30, False
             compiled = not any(hasattr(o.shape, "capsule_distances") for o in world.scene.obstacles.values())
             if "rrt-connect" in stages[index + 1 :] and compiled:  # perceived occupancy: the sampler is slow
                 # the sampler's path through the passage (smoothed later) is a better second seed than a random
                 # midpoint: the straight line only, for a share of the time and OPTIMIZE_ITERATIONS QPs
                 cap, perturbed = clock + OPTIMIZE_SHARE * max(deadline - clock, 0.0), 0
-                iterations = OPTIMIZE_ITERATIONS
+                iterations, sampler_follows = OPTIMIZE_ITERATIONS, True
             for seed_path in _optimization_seeds(world, q0, q1, active, limits, margin, perturbed, rng):
                 if time.perf_counter() >= cap:
                     break
@@ -224,6 +225,7 @@ def _find_path(
                     margin,
                     max_iterations=iterations,
                     deadline=cap,
+                    give_up_stalled=sampler_follows,  # stuck in collision: the sampler's turn
                 )
                 if result is not None:
                     times["optimize"] += time.perf_counter() - clock
