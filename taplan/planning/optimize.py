@@ -43,8 +43,11 @@ DENSE_SOLVERS = ("daqp", "quadprog", "proxqp")  # given dense matrices; others g
 # the same durations (window problems of bench_planning, refitted real body). The two-arm optimiser's QPs
 # (280-520 variables) crossed over near 300: 63 QPs of cubby/overhang/clutter/table problems, daqp 10-26 ms against
 # osqp 8-19 ms above 330 variables (first cubby QP: daqp 195 ms), daqp 2-3x faster below 160; the paths equal
-# to 1e-5 rad (osqp polishes its active set).
-LARGE_QP = 300
+# to 1e-5 rad (osqp polishes its active set). With slacks only on the violated rows (:func:`_soft_rows`) the QPs
+# have fewer, mostly hard rows, and the crossover moved: 64 QPs of 8 slow problems of the 39-suite, daqp against
+# osqp (the same solutions to 1e-13), 300-350 variables 135 against 391 ms in all (daqp faster on all 6), 407
+# variables 59 against 33 ms.
+LARGE_QP = 380
 OSQP_SETTINGS = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polish": True, "max_iter": 20000, "raise_error": False}
 REFINEMENTS = 4  # segment splits after a failed certification
 # ``give_up_stalled``: after STALL_WINDOW + 1 QPs, an optimisation whose constraint violation (Σ of the distances
