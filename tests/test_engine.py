@@ -110,6 +110,23 @@ def test_jacobian_rows_within_a_distance_equal_the_full_rows(robot: taplan.Robot
     assert np.any(full.jacobian[~close] != 0.0)
 
 
+def test_bounded_pairs_keep_the_exact_ones_and_bound_the_others(robot: taplan.Robot) -> None:
+    """With ``bound_beyond`` only the pairs the broad phase keeps are computed exactly (the others report their
+    bounding spheres' gap): the kept ones equal the unbounded batch in every output, Jacobian rows included."""
+    engine = CollisionWorld(robot, _scene(0)).engine()
+    Q = _configurations(robot, 20, 7)
+    beyond = 0.05  # [m]
+    full = engine.evaluate(Q)
+    bounded = engine.evaluate(Q, bound_beyond=beyond, jacobian_within=beyond)
+    kept = bounded.distance <= beyond
+    assert 0 < kept.sum() < kept.size  # both kinds present
+    np.testing.assert_array_equal(bounded.distance[kept], full.distance[kept])
+    for name in ("point_a", "point_b", "normal", "jacobian"):
+        np.testing.assert_array_equal(getattr(bounded, name)[kept], getattr(full, name)[kept])
+    assert np.all(bounded.distance[~kept] <= full.distance[~kept] + 1e-12)  # a lower bound [m]
+    assert np.all(bounded.jacobian[~kept] == 0.0)
+
+
 def test_native_and_pinocchio_kinematics_agree(robot: taplan.Robot) -> None:
     world = CollisionWorld(robot, _scene(0))
     engine = DistanceEngine(world)

@@ -170,7 +170,19 @@ class DistanceEngine:
         pa = np.concatenate([p[1] for p in parts], axis=1)
         pb = np.concatenate([p[2] for p in parts], axis=1)
         n = np.concatenate([p[3] for p in parts], axis=1)
-        J = np.concatenate([p[4] for p in parts], axis=1) if jacobian else None
+        J = None
+        if jacobian:  # one array, each part's rows written into its columns (the parts' zeros and a concatenation
+            # of them were a third of a batch's cost)
+            assert JE is not None
+            J = np.zeros((N, d.shape[1], JE.shape[-1]))
+            offset = 0
+            for part in parts:
+                rows = part[4]
+                if isinstance(rows, tuple):  # (configuration, column, row) of the pairs that have one
+                    J[rows[0], offset + rows[1]] = rows[2]
+                else:
+                    J[:, offset : offset + part[0].shape[1]] = rows
+                offset += part[0].shape[1]
         names, travel, owner_a, owner_b = self._pair_columns(obstacles)
         assert d.shape == (N, len(names))
         return BatchDistances(names, d, pa, pb, n, J, travel, owner_a, owner_b)
@@ -271,7 +283,7 @@ class DistanceEngine:
         self._columns = {key: (tuple(names), travel, owner_a, owner_b)}
         return self._columns[key]
 
-    def _self_pairs(self, E: np.ndarray, JE: np.ndarray | None, within: float = math.inf) -> tuple[np.ndarray, ...]:
+    def _self_pairs(self, E: np.ndarray, JE: np.ndarray | None, within: float = math.inf) -> tuple[Any, ...]:
         i, j = self.self_i, self.self_j
         N, S = len(E), len(i)
         a0, a1 = E[:, i, 0].reshape(-1, 3), E[:, i, 1].reshape(-1, 3)
@@ -285,19 +297,19 @@ class DistanceEngine:
         d = norm - ri - rj
         pa, pb = pa - ri[:, None] * normal, pb + rj[:, None] * normal
         rows = None
-        if JE is not None:
+        if JE is not None:  # (configuration, column, row) of the pairs within ``within``; the others' rows are 0
             n_, k_ = np.nonzero(d.reshape(N, S) <= within)
             flat = n_ * S + k_
             nn = normal[flat]
-            rows = np.zeros((N, S, JE.shape[-1]))
-            rows[n_, k_] = _row(JE[n_, i[k_]], s[flat], nn) - _row(JE[n_, j[k_]], t[flat], nn)
+            rows = (n_, k_, _row(JE[n_, i[k_]], s[flat], nn) - _row(JE[n_, j[k_]], t[flat], nn))
         shape = (N, S)
         return d.reshape(shape), pa.reshape(*shape, 3), pb.reshape(*shape, 3), normal.reshape(*shape, 3), rows
 
     def _obstacle_pairs(
         self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float, within: float = math.inf
-    ) -> tuple[np.ndarray, ...]:
-        """Moving bodies vs obstacles, obstacle-major (N, M, Bm) flattened to (N, M·Bm)."""
+    ) -> tuple[Any, ...]:
+        """Moving bodies vs obstacles, obstacle-major (N, M, Bm) flattened to (N, M·Bm). The exact distances are
+        computed only for the pairs the broad phase keeps (in a cluttered scene with a cutoff, a tenth of them)."""
         movers = self.movers
         N, M, Bm = len(E), len(self.obstacles), len(movers)
         # every pair in the obstacle's frame: (N, M, Bm, 3)
@@ -308,65 +320,58 @@ class DistanceEngine:
         shape = (N, M, Bm)
         radius = np.broadcast_to(self.radius[movers], shape)
         kind = np.broadcast_to(self.kind[None, :, None], shape)
-        s = np.zeros(shape)  # witness parameter on the robot segment
-        near = np.zeros((*shape, 3))  # witness on the obstacle's core (its frame): the segment's nearest point
-        exact = np.ones(shape, dtype=bool)
         # broad phase: the segment's distance to the obstacle's centre minus both bounding radii
-        core = _point_segment(np.zeros(3), e0, e1)
-        centre_gap = np.linalg.norm(e0 + core[..., None] * (e1 - e0), axis=-1)
-        gap = centre_gap - radius - self.bounding[None, :, None]
-        far = (gap > bound_beyond) & (kind != _HALF)
-        exact &= ~far
-        for code, solver in _SOLVERS.items():
-            pick = (kind == code) & exact
-            if pick.any():
-                s[pick], near[pick] = solver(e0[pick], e1[pick], self._parameter(code, pick))
-        s[far] = core[far]
+        s = _point_segment(np.zeros(3), e0, e1)  # witness parameter on the robot segment: nearest the centre
         p = e0 + s[..., None] * (e1 - e0)  # segment witness, obstacle frame
-        delta = p - near
-        norm = np.linalg.norm(delta, axis=-1)
-        normal = np.where(norm[..., None] > 1e-12, delta / np.maximum(norm, 1e-12)[..., None], [0.0, 0.0, 1.0])
-        core_radius = np.broadcast_to(self.obstacle_radius[None, :, None], shape)
-        rounded = (kind == _SPHERE) | (kind == _CAPSULE)
-        d = np.where(rounded, norm - core_radius, norm) - radius
-        half = kind == _HALF
-        d = np.where(half, p[..., 2] - radius, d)
-        normal = np.where(half[..., None], [0.0, 0.0, 1.0], normal)
-        near = np.where(rounded[..., None], near + core_radius[..., None] * normal, near)
-        near = np.where(half[..., None], p * [1.0, 1.0, 0.0], near)
-        d = np.where(far, gap, d)
+        centre_gap = np.linalg.norm(p, axis=-1)
+        d = centre_gap - radius - self.bounding[None, :, None]
+        far = (d > bound_beyond) & (kind != _HALF)
+        # a far pair reports that gap, witnessed by the segment's point nearest the centre and the centre
+        normal = np.where(centre_gap[..., None] > 1e-12, p / np.maximum(centre_gap, 1e-12)[..., None], [0.0, 0.0, 1.0])
         pa_local = p - radius[..., None] * normal
-        # the axis touches or enters a box or cylinder: penetration depth from coal (its EPA), not a point distance
-        # (and a capsule inside a cylinder: coal's depth there, so that both paths agree to 1e-9 m)
-        inside = exact & (((norm <= 1e-12) & ~rounded & ~half) | ((kind == _CYLINDER) & (d < 0.0)))
+        near = np.zeros((*shape, 3))  # witness on the obstacle (its frame)
+        # the exact pairs, as flat arrays of those only
+        exact = np.nonzero(~far)
+        inside = np.zeros(0, dtype=int)
+        if exact[0].size:
+            x0, x1, kx, rx, mx = e0[exact], e1[exact], kind[exact], radius[exact], exact[1]
+            sx, nx_near = np.zeros(len(kx)), np.zeros((len(kx), 3))  # the core's nearest point
+            for code, solver in _SOLVERS.items():
+                pick = kx == code
+                if pick.any():
+                    sx[pick], nx_near[pick] = solver(x0[pick], x1[pick], self.half[mx[pick]])
+            px = x0 + sx[:, None] * (x1 - x0)
+            delta = px - nx_near
+            norm = np.linalg.norm(delta, axis=-1)
+            nx = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+            core_radius = self.obstacle_radius[mx]
+            rounded = (kx == _SPHERE) | (kx == _CAPSULE)
+            half = kx == _HALF
+            dx = np.where(half, px[:, 2] - rx, np.where(rounded, norm - core_radius, norm) - rx)
+            nx = np.where(half[:, None], [0.0, 0.0, 1.0], nx)
+            nx_near = np.where(rounded[:, None], nx_near + core_radius[:, None] * nx, nx_near)
+            nx_near = np.where(half[:, None], px * [1.0, 1.0, 0.0], nx_near)
+            d[exact], s[exact], normal[exact] = dx, sx, nx
+            pa_local[exact], near[exact] = px - rx[:, None] * nx, nx_near
+            # the axis touches or enters a box or cylinder: penetration depth from coal (its EPA), not a point
+            # distance (and a capsule inside a cylinder: coal's depth there, so that both paths agree to 1e-9 m)
+            inside = np.flatnonzero(((norm <= 1e-12) & ~rounded & ~half) | ((kx == _CYLINDER) & (dx < 0.0)))
         # back to the root frame
         Rt = R.transpose(0, 2, 1)[None]  # rows back to the root frame: x = x_local Rᵀ + c
         pa = pa_local @ Rt + c[None, :, None]
-        pb = near @ Rt + c[None, :, None]
+        pb = near @ Rt + c[None, :, None]  # a far pair's: the centre
         normal = normal @ Rt
-        if far.any():  # the gap's witnesses: the segment's point nearest the centre and the centre
-            away = p - 0.0
-            direction = away / np.maximum(np.linalg.norm(away, axis=-1), 1e-12)[..., None]
-            direction = direction @ Rt
-            normal = np.where(far[..., None], direction, normal)
-            pb = np.where(far[..., None], np.broadcast_to(c[None, :, None], pb.shape), pb)
-        for n_, m_, b_ in zip(*np.nonzero(inside), strict=True):
+        for k in inside.tolist():
+            n_, m_, b_ = exact[0][k], exact[1][k], exact[2][k]
             d[n_, m_, b_], pa[n_, m_, b_], pb[n_, m_, b_], normal[n_, m_, b_], s[n_, m_, b_] = self._coal(
                 E[n_, movers[b_]], movers[b_], m_
             )
         rows = None
-        if JE is not None:
+        if JE is not None:  # (configuration, column, row) of the pairs within ``within``; the others' rows are 0
             n_, m_, b_ = np.nonzero(d <= within)
-            rows = np.zeros((*shape, JE.shape[-1]))
-            rows[n_, m_, b_] = _row(JE[n_, movers[b_]], s[n_, m_, b_], normal[n_, m_, b_])
+            rows = (n_, m_ * Bm + b_, _row(JE[n_, movers[b_]], s[n_, m_, b_], normal[n_, m_, b_]))
         flat = (N, M * Bm)
-        return (
-            d.reshape(flat),
-            pa.reshape(*flat, 3),
-            pb.reshape(*flat, 3),
-            normal.reshape(*flat, 3),
-            (rows.reshape(*flat, -1) if rows is not None else None),
-        )
+        return d.reshape(flat), pa.reshape(*flat, 3), pb.reshape(*flat, 3), normal.reshape(*flat, 3), rows
 
     def _field_pairs(self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float) -> tuple[np.ndarray, ...]:
         """Moving bodies vs obstacles that answer capsule distances themselves (occupancy voxels): one call per
@@ -401,12 +406,6 @@ class DistanceEngine:
             np.concatenate(out[3], axis=1),
             np.concatenate(out[4], axis=1) if JE is not None else None,
         )
-
-    def _parameter(self, code: int, pick: np.ndarray) -> np.ndarray:
-        """Per picked pair, the obstacle's size: half extents (box), radius and half length (cylinder), half length
-        (capsule, sphere: 0)."""
-        index = np.nonzero(pick)[1]  # the obstacle of each picked pair
-        return self.half[index]
 
     def _coal(self, ends: np.ndarray, body: int, item: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, float]:
         """coal's signed distance of body ``body`` (segment ``ends`` (2, 3), root frame) to obstacle ``item``, with
