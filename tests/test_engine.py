@@ -173,6 +173,29 @@ def test_attached_objects_go_through_the_world(robot: taplan.Robot) -> None:
     assert np.all(bounded.distance <= matrix.distance + 1e-12)  # the attached pairs' gaps are lower bounds too
 
 
+def test_jacobian_batch_with_attached_objects_equals_the_single_queries(robot: taplan.Robot) -> None:
+    """With an attached object the optimiser's batch (:meth:`CollisionWorld.jacobian_batch`) holds every pair of
+    :meth:`CollisionWorld.distances_many` within the cutoff with the same distance and Jacobian row."""
+    scene = _scene(0)
+    scene.attach("tool", Cylinder(0.03, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    world = CollisionWorld(robot, scene)
+    Q = _configurations(robot, 12, 11)
+    cutoff = 0.08  # [m]
+    batch = world.jacobian_batch(Q, cutoff=cutoff)
+    assert batch is not None and any(pair[0] == "tool" for pair in batch.pairs)
+    column = {pair: k for k, pair in enumerate(batch.pairs)}
+    tool_rows = 0
+    for n, single in enumerate(world.distances_many(Q, cutoff=cutoff)):
+        within = [batch.pairs[k] for k in np.flatnonzero(batch.distance[n] <= cutoff)]
+        assert set(within) == set(single.pairs)
+        k = np.array([column[p] for p in single.pairs], dtype=int)
+        np.testing.assert_allclose(batch.distance[n, k], single.distance, rtol=0, atol=1e-12)  # [m]
+        np.testing.assert_allclose(batch.jacobian[n, k], single.jacobian, rtol=0, atol=1e-12)  # [m/rad]
+        tool_rows += sum(pair[0] == "tool" for pair in single.pairs)
+        assert np.all(batch.jacobian[n, batch.distance[n] > cutoff] == 0.0)
+    assert tool_rows > 0  # the attached object's rows were compared
+
+
 def _attached_pairs_one_by_one(world: CollisionWorld, q: np.ndarray, bound_beyond: float) -> dict:
     """The attached object's pairs queried one at a time (coal for every pair within ``bound_beyond`` of its
     bounding sphere, else the spheres' gap), at ``q``: {pair: distance}."""

@@ -89,6 +89,9 @@ class _Pairs:
     s_b: np.ndarray | None = None
 
 
+_WITNESSES = ("point_a", "point_b", "normal")
+
+
 class _PairList:
     """Pairs found one at a time (coal queries of attached objects)."""
 
@@ -417,19 +420,64 @@ class CollisionWorld:
     def jacobian_batch(self, configurations: npt.ArrayLike, *, cutoff: float) -> Any:
         """The engine's :class:`~taplan.scene.engine.BatchDistances` at N configurations (N, nq) with the Jacobian
         rows of the pairs within ``cutoff`` [m] (the other rows zero): :meth:`distances_many` as arrays, without a
-        :class:`Distances` per configuration. None where :meth:`distances_many` goes one configuration at a time
-        (no engine, attached objects, non-finite configurations). Pairs beyond the cutoff may report a lower bound
-        of their distance (still beyond the cutoff) instead of the distance."""
+        :class:`Distances` per configuration; attached objects' pairs after the engine's (coal per configuration,
+        bounded by spheres beyond the cutoff). None without the engine or with non-finite configurations. Pairs
+        beyond the cutoff may report a lower bound of their distance (still beyond the cutoff) instead of the
+        distance."""
         Q = np.asarray(configurations, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != self.model.nq:
             raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
         self._refresh()
         engine = self.engine()
-        if engine is None or self._attached_items() or not np.all(np.isfinite(Q)):
+        if engine is None or not np.all(np.isfinite(Q)):
             return None
         # pairs whose bounding spheres are farther apart than the cutoff report that gap (a lower bound, beyond the
         # cutoff: left out like every pair beyond it) without the exact query
-        return engine.evaluate(Q, jacobian=True, jacobian_within=cutoff, bound_beyond=cutoff)
+        batch = engine.evaluate(Q, jacobian=True, jacobian_within=cutoff, bound_beyond=cutoff)
+        return self._with_attached_rows(batch, Q, cutoff) if self._attached_items() else batch
+
+    def _with_attached_rows(self, batch: Any, Q: np.ndarray, cutoff: float) -> Any:
+        """The engine's batch (with Jacobians) plus the attached objects' pairs and their Jacobian rows within
+        ``cutoff`` (coal and pinocchio's joint Jacobians, one configuration at a time; pairs beyond the cutoff
+        bounded by spheres): :meth:`distances_many`'s pairs without a :class:`Distances` per configuration, and
+        the robot's own pairs batched."""
+        from taplan.scene.engine import BatchDistances
+
+        model, data = self.model, self.data
+        N, nv = len(Q), model.nv
+        E, _ = self.engine().segments(Q, jacobian=False)  # the bodies' end points, as the engine's batch has them
+        parts, J = [], np.empty((N, 6, nv))
+        for n, q in enumerate(Q):
+            pin.computeJointJacobians(model, data, q)  # WORLD-frame joint Jacobians and the frames' placements
+            pin.updateFramePlacements(model, data)
+            J[n] = np.asarray(data.J).reshape(6, nv)
+            # no cutoff on the pairs (the same pairs in the same order at every configuration), bounds beyond it
+            parts.append(self._attached_distances(E[n, :, 0], E[n, :, 1], math.inf, cutoff))
+        first = parts[0]
+        distance = np.array([p.distance for p in parts]).reshape(N, -1)
+        A = distance.shape[1]
+        point_a, point_b, normal = (np.array([getattr(p, k) for p in parts]).reshape(N, A, 3) for k in _WITNESSES)
+        # the rows of :meth:`_part_rows` for every configuration at once: n · (v + ω × p) of each moving member
+        rows = np.zeros((N, A, nv))
+        for owner, point, sign in ((first.owner_a, point_a, 1.0), (first.owner_b, point_b, -1.0)):
+            moving = owner > 0
+            if np.any(moving):
+                n_, p_ = normal[:, moving], point[:, moving]
+                moment = np.cross(p_, n_)
+                row = n_ @ J[:, :3] + moment @ J[:, 3:]
+                rows[:, moving] += sign * row * self._support[owner[moving]][None]
+        rows[distance > cutoff] = 0.0  # as the engine's: rows only within the cutoff
+        return BatchDistances(
+            batch.pairs + tuple(first.names),
+            np.hstack([batch.distance, distance]),
+            np.concatenate([batch.point_a, point_a], axis=1),
+            np.concatenate([batch.point_b, point_b], axis=1),
+            np.concatenate([batch.normal, normal], axis=1),
+            np.concatenate([batch.jacobian, rows], axis=1),
+            np.vstack([batch.travel, first.travel]),
+            np.concatenate([batch.owner_a, first.owner_a]),
+            np.concatenate([batch.owner_b, first.owner_b]),
+        )
 
     def engine(self) -> Any:
         """The batched distance engine for the current scene (:class:`~taplan.scene.engine.DistanceEngine`), or
