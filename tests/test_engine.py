@@ -194,6 +194,13 @@ def test_jacobian_batch_with_attached_objects_equals_the_single_queries(robot: t
         tool_rows += sum(pair[0] == "tool" for pair in single.pairs)
         assert np.all(batch.jacobian[n, batch.distance[n] > cutoff] == 0.0)
     assert tool_rows > 0  # the attached object's rows were compared
+    matrix = world.distance_matrix(Q, bound_beyond=cutoff)  # the same pairs, bounds and witnesses without rows
+    assert matrix.pairs == batch.pairs
+    np.testing.assert_array_equal(matrix.distance, batch.distance)
+    tool = np.array([pair[0] == "tool" for pair in batch.pairs])
+    clear = (batch.distance > 1e-6) & tool[None]
+    gaps = np.linalg.norm(matrix.point_a - matrix.point_b, axis=-1)
+    np.testing.assert_allclose(gaps[clear], matrix.distance[clear], rtol=0, atol=1e-9)  # witnesses d apart [m]
 
 
 def _attached_pairs_one_by_one(world: CollisionWorld, q: np.ndarray, bound_beyond: float) -> dict:

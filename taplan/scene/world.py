@@ -89,9 +89,6 @@ class _Pairs:
     s_b: np.ndarray | None = None
 
 
-_WITNESSES = ("point_a", "point_b", "normal")
-
-
 class _PairList:
     """Pairs found one at a time (coal queries of attached objects)."""
 
@@ -436,49 +433,6 @@ class CollisionWorld:
         batch = engine.evaluate(Q, jacobian=True, jacobian_within=cutoff, bound_beyond=cutoff)
         return self._with_attached_rows(batch, Q, cutoff) if self._attached_items() else batch
 
-    def _with_attached_rows(self, batch: Any, Q: np.ndarray, cutoff: float) -> Any:
-        """The engine's batch (with Jacobians) plus the attached objects' pairs and their Jacobian rows within
-        ``cutoff`` (coal and pinocchio's joint Jacobians, one configuration at a time; pairs beyond the cutoff
-        bounded by spheres): :meth:`distances_many`'s pairs without a :class:`Distances` per configuration, and
-        the robot's own pairs batched."""
-        from taplan.scene.engine import BatchDistances
-
-        model, data = self.model, self.data
-        N, nv = len(Q), model.nv
-        E, _ = self.engine().segments(Q, jacobian=False)  # the bodies' end points, as the engine's batch has them
-        parts, J = [], np.empty((N, 6, nv))
-        for n, q in enumerate(Q):
-            pin.computeJointJacobians(model, data, q)  # WORLD-frame joint Jacobians and the frames' placements
-            pin.updateFramePlacements(model, data)
-            J[n] = np.asarray(data.J).reshape(6, nv)
-            # no cutoff on the pairs (the same pairs in the same order at every configuration), bounds beyond it
-            parts.append(self._attached_distances(E[n, :, 0], E[n, :, 1], math.inf, cutoff))
-        first = parts[0]
-        distance = np.array([p.distance for p in parts]).reshape(N, -1)
-        A = distance.shape[1]
-        point_a, point_b, normal = (np.array([getattr(p, k) for p in parts]).reshape(N, A, 3) for k in _WITNESSES)
-        # the rows of :meth:`_part_rows` for every configuration at once: n · (v + ω × p) of each moving member
-        rows = np.zeros((N, A, nv))
-        for owner, point, sign in ((first.owner_a, point_a, 1.0), (first.owner_b, point_b, -1.0)):
-            moving = owner > 0
-            if np.any(moving):
-                n_, p_ = normal[:, moving], point[:, moving]
-                moment = np.cross(p_, n_)
-                row = n_ @ J[:, :3] + moment @ J[:, 3:]
-                rows[:, moving] += sign * row * self._support[owner[moving]][None]
-        rows[distance > cutoff] = 0.0  # as the engine's: rows only within the cutoff
-        return BatchDistances(
-            batch.pairs + tuple(first.names),
-            np.hstack([batch.distance, distance]),
-            np.concatenate([batch.point_a, point_a], axis=1),
-            np.concatenate([batch.point_b, point_b], axis=1),
-            np.concatenate([batch.normal, normal], axis=1),
-            np.concatenate([batch.jacobian, rows], axis=1),
-            np.vstack([batch.travel, first.travel]),
-            np.concatenate([batch.owner_a, first.owner_a]),
-            np.concatenate([batch.owner_b, first.owner_b]),
-        )
-
     def engine(self) -> Any:
         """The batched distance engine for the current scene (:class:`~taplan.scene.engine.DistanceEngine`), or
         None when it is disabled or the scene has obstacles without a closed form (meshes, occupancy)."""
@@ -541,34 +495,51 @@ class CollisionWorld:
         return BatchDistances(tuple(index), distance, points, points, points, None, travel, owners, owners)
 
     def _with_attached(self, batch: Any, Q: np.ndarray, bound_beyond: float) -> Any:
-        """The engine's batch plus the attached objects' pairs (coal, one configuration at a time)."""
+        """The engine's batch plus the attached objects' pairs (:meth:`_attached_many`)."""
         from taplan.scene.engine import BatchDistances
 
-        model, data = self.model, self.data
-        joints = self._body_joint.tolist()
-        rows = []
-        for q in Q:
-            pin.forwardKinematics(model, data, q)
-            pin.updateFramePlacements(model, data)
-            rotation = np.array([data.oMi[j].rotation for j in joints])
-            origin = np.array([data.oMi[j].translation for j in joints])
-            starts = np.einsum("bij,bj->bi", rotation, self._body_start) + origin
-            ends = np.einsum("bij,bj->bi", rotation, self._body_end) + origin
-            rows.append(self._attached_distances(starts, ends, math.inf, bound_beyond))
-        names = rows[0].names  # no cutoff: the same pairs in the same order at every configuration
-        N, A = len(Q), len(names)
-        extra = np.array([r.distance for r in rows]).reshape(N, A)
-        points = np.zeros((N, len(batch.pairs) + A, 3))
+        E, _ = self.engine().segments(Q, jacobian=False)  # the bodies' end points, as the engine's batch has them
+        names, d, pa, pb, normal, owner_a, owner_b, travel, _ = self._attached_many(Q, E, bound_beyond, False)
         return BatchDistances(
             batch.pairs + tuple(names),
-            np.hstack([batch.distance, extra]),
-            points,
-            points,
-            points,
+            np.hstack([batch.distance, d]),
+            np.concatenate([batch.point_a, pa], axis=1),
+            np.concatenate([batch.point_b, pb], axis=1),
+            np.concatenate([batch.normal, normal], axis=1),
             None,
-            np.vstack([batch.travel, rows[0].travel]),
-            np.concatenate([batch.owner_a, rows[0].owner_a]),
-            np.concatenate([batch.owner_b, rows[0].owner_b]),
+            np.vstack([batch.travel, travel]),
+            np.concatenate([batch.owner_a, owner_a]),
+            np.concatenate([batch.owner_b, owner_b]),
+        )
+
+    def _with_attached_rows(self, batch: Any, Q: np.ndarray, cutoff: float) -> Any:
+        """The engine's batch (with Jacobians) plus the attached objects' pairs (:meth:`_attached_many`, bounded
+        beyond ``cutoff``) and their Jacobian rows within ``cutoff``: :meth:`distances_many`'s pairs without a
+        :class:`Distances` per configuration, and the robot's own pairs batched."""
+        from taplan.scene.engine import BatchDistances
+
+        E, _ = self.engine().segments(Q, jacobian=False)  # the bodies' end points, as the engine's batch has them
+        names, distance, point_a, point_b, normal, owner_a, owner_b, travel, J = self._attached_many(Q, E, cutoff, True)
+        N, A, nv = len(Q), len(names), self.model.nv
+        # the rows of :meth:`_part_rows` for every configuration at once: n · (v + ω × p) of each moving member
+        rows = np.zeros((N, A, nv))
+        for owner, point, sign in ((owner_a, point_a, 1.0), (owner_b, point_b, -1.0)):
+            moving = owner > 0
+            if np.any(moving):
+                n_, p_ = normal[:, moving], point[:, moving]
+                row = n_ @ J[:, :3] + np.cross(p_, n_) @ J[:, 3:]
+                rows[:, moving] += sign * row * self._support[owner[moving]][None]
+        rows[distance > cutoff] = 0.0  # as the engine's: rows only within the cutoff
+        return BatchDistances(
+            batch.pairs + tuple(names),
+            np.hstack([batch.distance, distance]),
+            np.concatenate([batch.point_a, point_a], axis=1),
+            np.concatenate([batch.point_b, point_b], axis=1),
+            np.concatenate([batch.normal, normal], axis=1),
+            np.concatenate([batch.jacobian, rows], axis=1),
+            np.vstack([batch.travel, travel]),
+            np.concatenate([batch.owner_a, owner_a]),
+            np.concatenate([batch.owner_b, owner_b]),
         )
 
     def _from_batch(self, batch: Any, n: int, cutoff: float) -> Distances:
@@ -834,6 +805,106 @@ class CollisionWorld:
                 )
             )
         return out
+
+    def _attached_many(self, Q: np.ndarray, E: np.ndarray, bound_beyond: float, jacobians: bool) -> tuple:
+        """:meth:`_attached_distances` without a cutoff at N configurations ``Q`` (N, nq) whose body end points
+        are ``E`` (N, B, 2, 3): the bounds of all configurations' pairs at once, coal only for the pairs within
+        ``bound_beyond`` of their bounding spheres (and half-spaces). Returns the pairs' names, distances (N, A),
+        witness points and normals (N, A, 3), owners (A,), travel rows (A, nv) and, with ``jacobians``, the WORLD
+        joint Jacobians (N, 6, nv) of the configurations."""
+        model, data = self.model, self.data
+        N, nv = len(Q), model.nv
+        attached = self._attached_items()
+        joints = self._body_joint.tolist()
+        frames = np.empty((N, len(attached), 4, 4))
+        rotation, origin = np.empty((N, len(joints), 3, 3)), np.empty((N, len(joints), 3))
+        J = np.empty((N, 6, nv)) if jacobians else None
+        for n, q in enumerate(Q):  # the frames of the objects and the bodies' joints (coal needs whole placements)
+            if J is not None:
+                pin.computeJointJacobians(model, data, q)
+                J[n] = np.asarray(data.J).reshape(6, nv)
+            else:
+                pin.forwardKinematics(model, data, q)
+            pin.updateFramePlacements(model, data)
+            for a, att in enumerate(attached):
+                frames[n, a] = data.oMf[att.frame].homogeneous @ att.pose
+            for b, j in enumerate(joints):
+                rotation[n, b], origin[n, b] = data.oMi[j].rotation, data.oMi[j].translation
+        starts, ends = E[:, :, 0], E[:, :, 1]
+        centers = (starts + ends) / 2  # the bodies' bounding spheres (N, B, 3)
+        radii = self._radius[None] + np.linalg.norm(ends - starts, axis=-1) / 2
+        names: list[tuple[str, str]] = []
+        columns: list[tuple[np.ndarray, ...]] = []  # per group of pairs: d (N, k), pa, pb, n (N, k, 3)
+        owner_a: list[np.ndarray] = []
+        owner_b: list[np.ndarray] = []
+        travel: list[np.ndarray] = []
+        transforms: dict[tuple[int, int], Any] = {}
+
+        def placed(a: int, n: int) -> Any:
+            if (a, -1 - n) not in transforms:
+                T = frames[n, a]
+                transforms[(a, -1 - n)] = self._coal.Transform3s(T[:3, :3], T[:3, 3])
+            return transforms[(a, -1 - n)]
+
+        for a, att in enumerate(attached):
+            parent = model.frames[att.frame].parentJoint
+            center = frames[:, a, :3, 3]  # (N, 3)
+            others = [(item, item.center, item.radius, None) for item in self._items]
+            listed = [k for k, body in enumerate(self.bodies) if body.name not in att.touch]
+            for k in listed:
+                others.append((None, centers[:, k], radii[:, k], k))
+            d = np.empty((N, len(others)))
+            pa, pb, normal = np.empty((N, len(others), 3)), np.empty((N, len(others), 3)), np.empty((N, len(others), 3))
+            for col, (item, other_center, other_radius, k) in enumerate(others):
+                away = center - other_center
+                apart = np.linalg.norm(away, axis=-1)
+                unit = away / np.maximum(apart, 1e-12)[:, None]
+                gap = apart - other_radius - att.radius
+                if item is not None and item.halfspace:
+                    gap = np.full(N, -np.inf)  # no bound for a half-space: always the exact query
+                d[:, col], normal[:, col] = gap, unit
+                pa[:, col] = center - att.radius * unit
+                pb[:, col] = other_center + np.asarray(other_radius)[..., None] * unit
+                for n in np.flatnonzero(gap <= bound_beyond).tolist():
+                    if item is not None:
+                        geometry, transform = item.geometry, item.transform
+                    else:
+                        geometry = self._body_geometry[k][0]
+                        transform = self._coal_placement(rotation[n, k], origin[n, k], k)
+                    d[n, col], pa[n, col], pb[n, col], normal[n, col] = self._pair(
+                        geometry, transform, att.geometry, placed(a, n)
+                    )
+                if item is not None:
+                    names.append((att.name, item.name))
+                    owner_b.append(np.zeros(1, dtype=int))
+                    travel.append(att.reach[None])
+                else:
+                    names.append((att.name, self.bodies[k].name))
+                    owner_b.append(self._body_joint[k : k + 1])
+                    travel.append((att.reach + self._body_reach[k])[None])
+                owner_a.append(np.array([parent]))
+            columns.append((d, pa, pb, normal))
+            for o in self._fields:  # against the object's bounding sphere: a lower bound of its distance
+                R, t = o.pose[:3, :3], o.pose[:3, 3]
+                local = (center - t) @ R
+                fd, fpa, fpb, fn = o.shape.capsule_distances(local, local, np.full(N, att.radius), math.inf)
+                columns.append((fd[:, None], (fpa @ R.T + t)[:, None], (fpb @ R.T + t)[:, None], (fn @ R.T)[:, None]))
+                names.append((att.name, o.name))
+                owner_a.append(np.array([parent]))
+                owner_b.append(np.zeros(1, dtype=int))
+                travel.append(att.reach[None])
+        d, pa, pb, normal = (np.concatenate([c[i] for c in columns], axis=1) for i in range(4))
+        return (
+            names,
+            d,
+            pa,
+            pb,
+            normal,
+            np.concatenate(owner_a),
+            np.concatenate(owner_b),
+            np.concatenate(travel).reshape(len(names), nv),
+            J,
+        )
 
     def _attached_distances(
         self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float = math.inf
