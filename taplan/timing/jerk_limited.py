@@ -61,8 +61,8 @@ from taplan.timing._fir import moving_average
 from taplan.timing._polynomial import (
     compose_quadratic,
     concatenated,
-    max_abs_derivative,
     near_cubic_bounds,
+    peak_ratio,
     sliced_pieces,
     time_scaled,
 )
@@ -71,6 +71,7 @@ from taplan.timing.straight import state_to_state_pieces
 from taplan.timing.toppra_retime import (
     DEFAULT_POINTS_PER_SEGMENT,
     LIMIT_MARGIN,
+    MIN_GRID_SEGMENTS,
     PathProfile,
     as_path,
     check_path_positions,
@@ -247,6 +248,7 @@ def jerk_limited(
     points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT,
     check_positions: bool = True,
     max_path_speed: float | None = None,
+    min_grid_segments: int = MIN_GRID_SEGMENTS,
 ) -> JerkLimitedResult:
     """Jerk-limited rest-to-rest trajectory along the path through the waypoints.
 
@@ -281,6 +283,7 @@ def jerk_limited(
         check_positions: Raise when the path leaves the position limits.
         max_path_speed: Upper bound on the path speed ``ṡ``, or None (see
             :func:`~taplan.timing.toppra_retime.time_optimal_profile`); the moving average keeps it.
+        min_grid_segments: Fewest TOPP-RA grid segments in all (a path of few waypoints gets more per interval).
 
     Returns:
         The trajectory, with its duration ratio to TOPP-RA and its largest waypoint deviation.
@@ -302,33 +305,33 @@ def jerk_limited(
         raise InvalidInputError("repairs", repairs, "an integer >= 0")
     if int(points_per_segment) < 1:
         raise InvalidInputError("points_per_segment", points_per_segment, "an integer >= 1")
+    if isinstance(min_grid_segments, bool) or not isinstance(min_grid_segments, int) or min_grid_segments < 1:
+        raise InvalidInputError("min_grid_segments", min_grid_segments, "an integer >= 1")
     path, _, _ = as_path(path_or_waypoints, limits.size, limits=limits if check_positions else None)
     if check_positions:
         check_path_positions(path, limits)
     if method == "joint" and max_deviation > 0:
-        result, repaired = _joint_filter(path, limits, float(max_deviation), int(points_per_segment), max_path_speed)
+        grid = (int(points_per_segment), int(min_grid_segments))
+        result, repaired = _joint_filter(path, limits, float(max_deviation), grid, max_path_speed)
         if result is not None and not repaired:
             return result
         # Slowing the cut corners compounds over the repairs (a dense polyline at high limits: 20 s where TOPP-RA
         # takes 0.43 s); the path method passes every waypoint exactly at 10-15 % above TOPP-RA: the faster wins.
         beat = math.inf if result is None else result.trajectory.duration
-        exact = _path_filter(
-            path, limits, width_factors, jerk_fraction, int(repairs), int(points_per_segment), max_path_speed, beat
-        )
+        exact = _path_filter(path, limits, width_factors, jerk_fraction, int(repairs), grid, max_path_speed, beat)
         if result is not None and (exact is None or result.trajectory.duration <= exact.trajectory.duration):
             return result
         assert exact is not None  # beat is inf without a joint result: the path filter returns one
         logger.debug("jerk_limited: corners cut by more than %.4g rad; the path timing is faster", max_deviation)
         return exact
-    exact = _path_filter(
-        path, limits, width_factors, jerk_fraction, int(repairs), int(points_per_segment), max_path_speed
-    )
+    grid = (int(points_per_segment), int(min_grid_segments))
+    exact = _path_filter(path, limits, width_factors, jerk_fraction, int(repairs), grid, max_path_speed)
     assert exact is not None  # nothing to beat: every round is kept
     return exact
 
 
 def _joint_filter(
-    path: Path, limits: JointLimits, max_deviation: float, points_per_segment: int, max_path_speed: float | None
+    path: Path, limits: JointLimits, max_deviation: float, grid: tuple[int, int], max_path_speed: float | None
 ) -> tuple[JerkLimitedResult | None, bool]:
     """The joint-space moving average of TOPP-RA (None when a corner stays cut by more than ``max_deviation``) and
     whether corners had to be slowed for it."""
@@ -337,11 +340,17 @@ def _joint_filter(
     jerk = np.asarray(limits.jerk, dtype=float)
     width = float(np.max(2.0 * acc / jerk))
     interior = path.positions[1:-1]
-    scale = np.ones(len(grid_for(path, points_per_segment)))
+    scale = np.ones(len(grid_for(path, *grid)))
     topp_duration = 0.0
     for attempt in range(DEVIATION_REPAIRS + 1):
         profile = time_optimal_profile(
-            path, vel, acc, points_per_segment=points_per_segment, limit_scale=scale, max_path_speed=max_path_speed
+            path,
+            vel,
+            acc,
+            points_per_segment=grid[0],
+            limit_scale=scale,
+            max_path_speed=max_path_speed,
+            min_grid_segments=grid[1],
         )
         if attempt == 0:
             topp_duration = profile.duration
@@ -447,7 +456,7 @@ def _path_filter(
     width_factors: tuple[float, ...],
     jerk_fraction: float,
     repairs: int,
-    points_per_segment: int,
+    grid: tuple[int, int],
     max_path_speed: float | None = None,
     beat: float = math.inf,
 ) -> JerkLimitedResult | None:
@@ -464,18 +473,19 @@ def _path_filter(
     jerk = np.asarray(limits.jerk, dtype=float)
     base = float(np.max(acc / jerk))
     topp_duration = time_optimal_profile(
-        path, vel, acc, points_per_segment=points_per_segment, max_path_speed=max_path_speed
+        path, vel, acc, points_per_segment=grid[0], max_path_speed=max_path_speed, min_grid_segments=grid[1]
     ).duration
     if topp_duration + min(width_factors) * base >= beat:
         return None
-    scale = np.ones(len(grid_for(path, points_per_segment)))
+    scale = np.ones(len(grid_for(path, *grid)))
     best: JerkLimitedResult | None = None
     for _ in range(repairs + 1):
         profile = time_optimal_profile(
             path,
             vel,
             acc,
-            points_per_segment=points_per_segment,
+            points_per_segment=grid[0],
+            min_grid_segments=grid[1],
             jerk=jerk,
             jerk_fraction=jerk_fraction,
             limit_scale=scale,
@@ -487,9 +497,10 @@ def _path_filter(
         for factor in width_factors:
             w = factor * base
             traj = filter_profile(profile, w, limits.names)
-            rv = np.max(max_abs_derivative(traj, 1) / vel, axis=1)
-            ra = np.max(max_abs_derivative(traj, 2) / acc, axis=1)
-            rj = np.max(max_abs_derivative(traj, 3) / jerk, axis=1)
+            # per segment: exact where a limit is exceeded, at most 1 elsewhere (all the scaling and tightening use)
+            rv = np.max(peak_ratio(traj, 1, vel), axis=1)
+            ra = np.max(peak_ratio(traj, 2, acc), axis=1)
+            rj = np.max(peak_ratio(traj, 3, jerk), axis=1)
             c = max(1.0, float(rv.max()), float(np.sqrt(ra.max())), float(np.cbrt(rj.max()))) * (1.0 + LIMIT_MARGIN)
             if round_best is None or traj.duration * c < round_best[0]:
                 round_best = (traj.duration * c, traj, w, c, np.maximum(np.maximum(rv, ra), rj))

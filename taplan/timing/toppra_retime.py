@@ -37,7 +37,7 @@ import toppra.constraint
 from taplan._validation import as_vector
 from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
-from taplan.timing._polynomial import compose_quadratic, max_abs_derivative, time_scaled
+from taplan.timing._polynomial import compose_quadratic, peak_ratio, time_scaled
 from taplan.timing.constraints import PathJerkSpeedConstraint, PathSpeedCap, SegmentLimitConstraint
 from taplan.timing.path import Path, drop_duplicates
 from taplan.trajectory import Trajectory
@@ -153,14 +153,17 @@ def _path_speed(path: Path, s: float, velocity: np.ndarray | None, name: str) ->
     return speed
 
 
-def grid_for(path: Path, points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT) -> np.ndarray:
-    """The TOPP-RA gridpoints taplan uses for ``path``: every waypoint, each interval split uniformly."""
-    return _grid(path, points_per_segment)
+def grid_for(
+    path: Path, points_per_segment: int = DEFAULT_POINTS_PER_SEGMENT, min_grid_segments: int = MIN_GRID_SEGMENTS
+) -> np.ndarray:
+    """The TOPP-RA gridpoints taplan uses for ``path``: every waypoint, each interval split uniformly into
+    ``points_per_segment`` parts, or more when that makes fewer than ``min_grid_segments`` in all."""
+    return _grid(path, points_per_segment, min_grid_segments)
 
 
-def _grid(path: Path, points_per_segment: int) -> np.ndarray:
+def _grid(path: Path, points_per_segment: int, min_grid_segments: int = MIN_GRID_SEGMENTS) -> np.ndarray:
     ss = path.ss_waypoints
-    k = max(int(points_per_segment), int(np.ceil(MIN_GRID_SEGMENTS / (len(ss) - 1))))
+    k = max(int(points_per_segment), int(np.ceil(min_grid_segments / (len(ss) - 1))))
     fractions = np.arange(k) / k
     grid = (ss[:-1, None] + np.diff(ss)[:, None] * fractions[None, :]).ravel()
     return np.append(grid, ss[-1])
@@ -178,6 +181,7 @@ def time_optimal_profile(
     jerk_fraction: float = 0.5,
     limit_scale: np.ndarray | None = None,
     max_path_speed: float | None = None,
+    min_grid_segments: int = MIN_GRID_SEGMENTS,
 ) -> PathProfile:
     """Solve TOPP-RA with toppra on taplan's grid and integrate the result exactly.
 
@@ -195,11 +199,12 @@ def time_optimal_profile(
             grid :func:`grid_for` returns, or None.
         max_path_speed: Upper bound on the path speed ``ṡ`` [unit s / s], or None (e.g. 1 for a path parametrised
             by a recording's time: never faster than the recording).
+        min_grid_segments: Fewest grid segments in all (more per interval on a path of few waypoints).
 
     Raises:
         TimingError: toppra found no parameterisation; the message says why.
     """
-    grid = _grid(path, points_per_segment)
+    grid = _grid(path, points_per_segment, min_grid_segments)
     constraints = [SegmentLimitConstraint(velocity, acceleration, scale=limit_scale)]
     if jerk is not None:
         constraints.append(PathJerkSpeedConstraint(jerk, jerk_fraction))
@@ -245,9 +250,10 @@ def _failure_reason(K: np.ndarray | None, sd_start: float, sd_end: float, instan
 
 
 def max_velocity_acceleration(traj: Trajectory, velocity: np.ndarray, acceleration: np.ndarray) -> tuple[float, float]:
-    """Exact peaks of ``|q̇| / velocity`` and ``|q̈| / acceleration`` over the whole trajectory."""
-    rv = float(np.max(max_abs_derivative(traj, 1).max(axis=0) / velocity))
-    ra = float(np.max(max_abs_derivative(traj, 2).max(axis=0) / acceleration))
+    """Peaks of ``|q̇| / velocity`` and ``|q̈| / acceleration`` over the whole trajectory: exact when above 1, at most
+    1 otherwise (:func:`~taplan.timing._polynomial.peak_ratio`: whether and how much to scale is exact)."""
+    rv = float(np.max(peak_ratio(traj, 1, velocity), initial=0.0))
+    ra = float(np.max(peak_ratio(traj, 2, acceleration), initial=0.0))
     return rv, ra
 
 
