@@ -387,7 +387,14 @@ def test_distances_of_a_subset_equal_the_full_batch(robot: taplan.Robot, seed: i
     near = exact <= bound_beyond
     np.testing.assert_allclose(got[:, field][near], exact[near], rtol=0, atol=1e-9)
     names = tuple(full.pairs[k] for k in columns)
-    np.testing.assert_allclose(world.pair_distances(Q, names, bound_beyond=bound_beyond), got, rtol=0, atol=0)
+    named = world.pair_distances(Q, names, bound_beyond=bound_beyond)
+    assert named is not None and named.pairs == names
+    np.testing.assert_allclose(named.distance, got, rtol=0, atol=0)
+    np.testing.assert_allclose(named.travel, full.travel[columns], rtol=0, atol=0)
+    every = world.pair_distances(Q, bound_beyond=bound_beyond)  # every pair: the full batch's, distances only
+    assert every is not None and every.pairs == full.pairs
+    solid = np.array([pair[1] != "seen" for pair in full.pairs])
+    np.testing.assert_allclose(every.distance[:, solid], full.distance[:, solid], rtol=0, atol=1e-12)
 
 
 def test_pair_distances_leave_attached_pairs_to_the_full_batch(robot: taplan.Robot) -> None:
@@ -400,6 +407,7 @@ def test_pair_distances_leave_attached_pairs_to_the_full_batch(robot: taplan.Rob
     tool_pair = next(pair for pair in matrix.pairs if pair[0] == "tool")
     got = world.pair_distances(Q, (robot_pair,))
     assert got is not None
-    np.testing.assert_allclose(got[:, 0], matrix.distance[:, 0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.distance[:, 0], matrix.distance[:, 0], rtol=0, atol=1e-12)
     assert world.pair_distances(Q, (robot_pair, tool_pair)) is None
+    assert world.pair_distances(Q) is None  # every pair includes the attached object's
     assert CollisionWorld(robot, scene, engine=False).pair_distances(Q, (robot_pair,)) is None

@@ -27,7 +27,7 @@ import numpy as np
 
 from taplan.errors import InvalidInputError
 from taplan.scene.world import CollisionWorld
-from taplan.timing._polynomial import max_abs_derivative
+from taplan.timing._polynomial import derivative_bound
 from taplan.trajectory import Trajectory
 
 __all__ = ["SegmentCheck", "check_segment", "check_segments", "verify_trajectory", "Verification"]
@@ -210,12 +210,11 @@ def _certify_batch(
         """Distances at the parameters: every pair, or only the columns ``needed`` (the others +inf: certified on
         every interval being split, so on each of its pieces) where the world evaluates a subset."""
         Q = configurations(curve, s)
-        if needed is not None:
-            names = list(columns)
-            pairs = tuple(names[k] for k in needed.tolist())
-            distance = world.pair_distances(Q, pairs, bound_beyond=BOUND_BEYOND)
-            if distance is not None:
-                return record(curve, s, pairs, distance, travel[needed])
+        names = list(columns)
+        pairs = None if needed is None else tuple(names[k] for k in needed.tolist())
+        found = world.pair_distances(Q, pairs, bound_beyond=BOUND_BEYOND)  # distances only, no witness points
+        if found is not None:
+            return record(curve, s, found.pairs, found.distance, found.travel)
         batch = world.distance_matrix(Q, bound_beyond=BOUND_BEYOND)
         return record(curve, s, batch.pairs, batch.distance, batch.travel)
 
@@ -362,8 +361,9 @@ def verify_trajectory(
 ) -> Verification:
     """Certify ``trajectory`` keeps more than ``floor`` [m] of clearance at every instant.
 
-    Each pair's distance changes at most at ``rate_p = travel_p · max|q̇|`` (exact peak joint speeds of the pieces
-    in the interval), so over ``[t_a, t_b]`` it stays above ``(d_a + d_b − rate_p (t_b − t_a)) / 2``. Windows of
+    Each pair's distance changes at most at ``rate_p = travel_p · max|q̇|`` (the joint speeds' bounds on the pieces
+    in the interval: their Bernstein coefficients, :func:`~taplan.timing._polynomial.derivative_bound`), so over
+    ``[t_a, t_b]`` it stays above ``(d_a + d_b − rate_p (t_b − t_a)) / 2``. Windows of
     ``LOOKAHEAD`` are certified with that two-sided bound and halved until every pair passes; an evaluated
     clearance within ``MIN_CERTIFIED`` of ``floor`` is a failure.
 
@@ -379,7 +379,7 @@ def verify_trajectory(
     robot = world.robot
     index = robot.indices(names)
     speeds = np.zeros((len(trajectory.times) - 1, robot.nq))
-    speeds[:, index] = max_abs_derivative(trajectory, 1)  # exact peak |q̇| per piece and joint [rad/s]
+    speeds[:, index] = derivative_bound(trajectory, 1)  # a bound of |q̇| per piece and joint [rad/s]
     times = trajectory.times
     base = robot.home.copy() if hold is None else np.asarray(hold, dtype=float).copy()
 

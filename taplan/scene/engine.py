@@ -190,7 +190,7 @@ class DistanceEngine:
     def columns_of(self, pairs: tuple[tuple[str, str], ...]) -> np.ndarray | None:
         """The columns of the named pairs in :meth:`evaluate`'s pairs (with obstacles), or None when one is not the
         engine's (an attached object's pair)."""
-        names = self._pair_columns(True)[0]
+        names = self.pair_columns()[0]
         if self._index[0] is not names:
             self._index = (names, {pair: k for k, pair in enumerate(names)})
         index = self._index[1]
@@ -264,9 +264,14 @@ class DistanceEngine:
         d[half] = lower - radius[half]
         return d.reshape(N, K)
 
+    def pair_columns(self) -> tuple[tuple[tuple[str, str], ...], np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`evaluate`'s pairs (with obstacles): names, travel rows (P, nv), owners of both members (P,)."""
+        return self._pair_columns(True)
+
     def _pair_columns(self, obstacles: bool) -> tuple[tuple[tuple[str, str], ...], np.ndarray, np.ndarray, np.ndarray]:
         """The pairs' names, travel rows and owners, built once per scene version: the same objects every call,
         so that a caller can map its columns once (the certificates' batches)."""
+        self._refresh()
         key = (self._version, obstacles)
         cached = self._columns.get(key)
         if cached is not None:

@@ -69,6 +69,17 @@ class Distances:
 
 
 @dataclass(frozen=True)
+class PairDistances:
+    """Distances of named pairs at N configurations (:meth:`CollisionWorld.pair_distances`): ``pairs`` (P names),
+    ``distance`` (N, P) [m] (exact, or a lower bound beyond the caller's ``bound_beyond``), ``travel`` (P, nv) the
+    pairs' reach rows [m/rad] (:class:`Distances`)."""
+
+    pairs: tuple[tuple[str, str], ...]
+    distance: np.ndarray
+    travel: np.ndarray
+
+
+@dataclass(frozen=True)
 class _Pairs:
     """Pairs of one kind, before they are joined: names, distances, witness points, normals, the joints carrying
     each member (0: fixed) and the travel rows; where a member is a robot body (its index in ``body_a``/``body_b``,
@@ -446,22 +457,35 @@ class CollisionWorld:
         return self._engine
 
     def pair_distances(
-        self, configurations: npt.ArrayLike, pairs: tuple[tuple[str, str], ...], *, bound_beyond: float = math.inf
-    ) -> np.ndarray | None:
-        """The distances (N, K) [m] of the named ``pairs`` (as :meth:`distance_matrix` names them) at N
-        configurations (N, nq), as :meth:`distance_matrix` reports them (to rounding), without evaluating the other
-        pairs; None where only :meth:`distance_matrix` answers (no engine, a pair of an attached object, non-finite
-        configurations). For a certificate's later levels, which need only the pairs not yet certified."""
+        self,
+        configurations: npt.ArrayLike,
+        pairs: tuple[tuple[str, str], ...] | None = None,
+        *,
+        bound_beyond: float = math.inf,
+    ) -> PairDistances | None:
+        """The distances of the named ``pairs`` (as :meth:`distance_matrix` names them; None: every pair) at N
+        configurations (N, nq), as :meth:`distance_matrix` reports them (to rounding), without the witness points
+        and normals and without evaluating the other pairs: 15-50 % cheaper than :meth:`distance_matrix` for every
+        pair, and a certificate's later levels need only the few pairs not yet certified. None where only
+        :meth:`distance_matrix` answers: no engine, non-finite configurations, a pair of an attached object (or
+        every pair, with attached objects)."""
         Q = np.asarray(configurations, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != self.model.nq:
             raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
         engine = self.engine()
         if engine is None or not np.all(np.isfinite(Q)):
             return None
+        names, travel, _, _ = engine.pair_columns()
+        if pairs is None:
+            if self._attached_items():
+                return None
+            every = engine.distances_of(Q, np.arange(len(names)), bound_beyond=bound_beyond)
+            return PairDistances(names, every, travel)
         columns = engine.columns_of(tuple(pairs))
         if columns is None:
             return None
-        return engine.distances_of(Q, columns, bound_beyond=bound_beyond)
+        distance = engine.distances_of(Q, columns, bound_beyond=bound_beyond)
+        return PairDistances(tuple(pairs), distance, travel[columns])
 
     def distance_matrix(self, configurations: npt.ArrayLike, *, bound_beyond: float = math.inf) -> Any:
         """Every pair (no cutoff) at N configurations (N, nq) as one :class:`~taplan.scene.engine.BatchDistances`
