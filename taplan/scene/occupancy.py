@@ -557,57 +557,48 @@ class OccupancyGrid:
         points up to that depth behind each hit are occupied too (every half voxel): surfaces are taken as solids
         at least that thick. Returns (measured, kept) pixels; ``self.excluded_pixels`` is then the mask of the
         pixels whose hit fell in ``exclude`` (the robot's own)."""
+        from taplan.scene.fusion_kernels import insert_pixels  # numba loads on first fusion, not with taplan
+
         R, t = T_root_camera[:3, :3], T_root_camera[:3, 3]
         inv = 1.0 / self.resolution
-        valid = np.isfinite(depth)
-        measured = int(np.count_nonzero(valid))
+        depth = np.ascontiguousarray(depth, dtype=np.float32)
+        measured = int(np.count_nonzero(np.isfinite(depth)))
         steps = int(math.ceil(thickness / (self.resolution / 2) - 1e-9)) if thickness > 0 else 0
-        slopes = []
-        for k in range(3):
-            # voxel coordinate along axis k, in voxel units: (depth * (R_k . ray) + t_k - origin_k) / h
-            row = ((R[k, 1] * ray_y + R[k, 2]) * inv).astype(np.float32)[:, None]
-            col = (R[k, 0] * ray_x * inv).astype(np.float32)[None, :]
-            slopes.append(row + col)
-        found = []
-        kept_pixels = 0
-        offsets = [np.float32((t[k] - self.origin[k]) * inv) for k in range(3)]
-        strides = [np.int32(v) for v in self._strides]
-        for layer in range(steps + 1):
-            shifted = depth + np.float32(min(layer * self.resolution / 2, thickness)) if layer else depth
-            # per axis the voxel coordinate (float32, NaN for no measurement: every comparison with it is False)
-            inside = None
-            key = None
-            for k in range(3):
-                f = shifted * slopes[k]
-                f += offsets[k]
-                ok = f >= 0
-                ok &= f < self.shape[k]
-                inside = ok if inside is None else inside & ok
-                with np.errstate(invalid="ignore"):  # NaN pixels cast to garbage, masked by `inside`
-                    cell = f.astype(np.int32)
-                if key is None:
-                    key = cell * strides[k]
-                elif k == 1:
-                    key += cell * strides[k]
-                else:
-                    key += cell
-            keys = key[inside].astype(np.int64)
-            if not layer:
-                kept_pixels = len(keys)
-                first_keys, first_inside = keys, inside
-            found.append(keys)
-        keys = np.concatenate(found) if steps else found[0]
-        self.dropped_outside += measured - kept_pixels
+        # voxel coordinate along axis k, in voxel units: (depth * (R_k . ray) + t_k - origin_k) / h, the ray's
+        # part per row and per column (float32: a voxel index needs no more)
+        row_slope = np.stack([((R[k, 1] * ray_y + R[k, 2]) * inv).astype(np.float32) for k in range(3)])
+        col_slope = np.stack([(R[k, 0] * ray_x * inv).astype(np.float32) for k in range(3)])
+        offsets = np.array([(t[k] - self.origin[k]) * inv for k in range(3)], dtype=np.float32)
+        shape = np.asarray(self.shape, dtype=np.int64)
+        seen = self.seen if self.seen is not None else np.zeros(0)
         self.excluded_pixels = np.zeros(depth.shape, dtype=bool)
         if exclude is not None and len(exclude):
             self._scratch[exclude] = True
-            keys = keys[~self._scratch[keys]]
-            self.excluded_pixels[first_inside] = self._scratch[first_keys]
-            self._scratch[exclude] = False
-        self.occupied[keys] = True
-        self.free[keys] = False
-        if self.seen is not None:
-            self.seen[keys] = stamp
+        try:
+            for layer in range(steps + 1):  # the hits, then every half voxel behind them up to ``thickness``
+                extra = np.float32(min(layer * self.resolution / 2, thickness))
+                kept = insert_pixels(
+                    depth,
+                    row_slope,
+                    col_slope,
+                    offsets,
+                    shape,
+                    self._strides,
+                    extra,
+                    self._scratch,
+                    self.occupied,
+                    self.free,
+                    seen,
+                    float(stamp),
+                    self.excluded_pixels,
+                    layer == 0,
+                )
+                if layer == 0:
+                    kept_pixels = kept
+        finally:
+            if exclude is not None and len(exclude):
+                self._scratch[exclude] = False
+        self.dropped_outside += measured - kept_pixels
         self.version += 1
         return measured, kept_pixels
 
@@ -662,31 +653,29 @@ class OccupancyGrid:
         corner = max(abs(cx), abs(W - cx)) / fx, max(abs(cy), abs(H - cy)) / fy
         half_angle = math.atan(math.hypot(*corner))  # the cone around the image's frustum
         candidates = self._region_in_view(T_root_camera[:3, 3], T_root_camera[:3, 2], half_angle, max_range)
-        unknown = np.flatnonzero(candidates & ~(self.occupied[keys] | self.free[keys]))
-        keys, centres = keys.take(unknown), self._region_centres.take(unknown, axis=0)
-        if not len(keys):
-            return 0
-        R, t = T_root_camera[:3, :3].astype(np.float32), T_root_camera[:3, 3].astype(np.float32)
-        local = (centres - t) @ R  # camera frame
-        z = local[:, 2]
-        ahead = np.flatnonzero((z > 1e-3) & (z <= max_range))
-        z = z[ahead]
-        u = np.floor(np.float32(fx) * local[ahead, 0] / z + np.float32(cx))
-        v = np.floor(np.float32(fy) * local[ahead, 1] / z + np.float32(cy))
-        inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
-        rows, z = ahead[inside], z[inside]
-        pixel = v[inside].astype(np.int64) * W + u[inside].astype(np.int64)
-        if ignore is not None:
-            depth = np.where(ignore, np.nan, depth)
-        measured = _nearest_around(depth).reshape(-1)[pixel]
-        self.viewed[keys[rows]] = True
-        finite = np.isfinite(measured)
-        seen = finite & (measured > z + np.float32(margin))
-        self.shadowed[keys[rows[finite & ~seen]]] = True
-        found = keys[rows[seen]]
-        self.free[found] = True
+        from taplan.scene.fusion_kernels import judge_voxels
+
+        if ignore is None:
+            ignore = np.zeros(depth.shape, dtype=bool)
+        found = judge_voxels(
+            keys,
+            self._region_centres,
+            candidates,
+            self.occupied,
+            self.free,
+            self.viewed,
+            self.shadowed,
+            np.ascontiguousarray(depth, dtype=np.float32),
+            np.ascontiguousarray(ignore, dtype=bool),
+            np.ascontiguousarray(T_root_camera[:3, :3], dtype=np.float32),
+            np.ascontiguousarray(T_root_camera[:3, 3], dtype=np.float32),
+            np.array([fx, fy, cx, cy], dtype=np.float32),
+            np.float32(margin),
+            np.float32(1e-3),
+            np.float32(max_range),
+        )
         self.version += 1
-        return len(found)
+        return found
 
     def unknown_keys(self, which: str = "all") -> np.ndarray:
         """Keys of the region's voxels neither occupied nor known free: ``"all"`` of them, or ``"occluded"``: those
@@ -747,27 +736,15 @@ class OccupancyGrid:
         """Keys of the voxels whose box may come within ``radii`` [m] of a segment (the robot's bodies plus
         padding): the voxel's centre is within ``radius + half diagonal``. Every point within ``radius`` of a segment
         falls in one of them."""
-        found = []
+        from taplan.scene.fusion_kernels import voxels_near_segments
+
         half = self.resolution * math.sqrt(3) / 2
-        h = self.resolution
-        for s, e, r in zip(
-            np.asarray(starts, dtype=float), np.asarray(ends, dtype=float), np.asarray(radii), strict=True
-        ):
-            reach = float(r) + half
-            lo = np.maximum(np.floor((np.minimum(s, e) - reach - self.origin) / h).astype(int), 0)
-            hi = np.minimum(np.floor((np.maximum(s, e) + reach - self.origin) / h).astype(int) + 1, self.shape)
-            if np.any(hi <= lo):
-                continue
-            # voxel centres relative to the segment start, one axis per array dimension (broadcast, no grid)
-            x, y, z = (self.origin[k] + (np.arange(lo[k], hi[k]) + 0.5) * h - s[k] for k in range(3))
-            x, y, z = x[:, None, None], y[None, :, None], z[None, None, :]
-            u = e - s
-            length2 = float(u @ u)
-            t = np.clip((x * u[0] + y * u[1] + z * u[2]) / length2, 0.0, 1.0) if length2 > 1e-18 else 0.0
-            near = (x - t * u[0]) ** 2 + (y - t * u[1]) ** 2 + (z - t * u[2]) ** 2 <= reach * reach
-            i, j, k = np.nonzero(near)
-            found.append((i + lo[0]) * self._strides[0] + (j + lo[1]) * self._strides[1] + (k + lo[2]))
-        return np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
+        starts = np.ascontiguousarray(starts, dtype=float).reshape(-1, 3)
+        ends = np.ascontiguousarray(ends, dtype=float).reshape(-1, 3)
+        reaches = np.asarray(radii, dtype=float).reshape(-1) + half
+        return voxels_near_segments(
+            starts, ends, reaches, self.origin, self.resolution, np.asarray(self.shape, dtype=np.int64), self._strides
+        )
 
     def snapshot(self) -> Occupancy:
         """The occupied voxels now, as an obstacle shape in the root frame."""
