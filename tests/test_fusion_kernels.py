@@ -1,6 +1,6 @@
 """Fusion's compiled kernels (taplan.scene.fusion_kernels) leave exactly the voxel states the numpy code they
 replaced left: ``NumpyGrid`` below is that code (OccupancyGrid's insert_image, mark_seen_free and near_segments as
-of main 8e912cf), run beside the compiled grid on the same rendered images (robot in view, noise, missing pixels,
+of main 8e912cf, plus the "viewed into nothing" rule added with them), run beside the compiled grid on the same rendered images (robot in view, noise, missing pixels,
 thick surfaces, stamps)."""
 
 from __future__ import annotations
@@ -135,13 +135,19 @@ class NumpyGrid(OccupancyGrid):
         inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
         rows, z = ahead[inside], z[inside]
         pixel = v[inside].astype(np.int64) * W + u[inside].astype(np.int64)
+        own = np.zeros(depth.shape, dtype=np.float32) if ignore is None else ignore.astype(np.float32)
         if ignore is not None:
             depth = np.where(ignore, np.nan, depth)
         measured = _nearest_around(depth).reshape(-1)[pixel]
         self.viewed[keys[rows]] = True
         finite = np.isfinite(measured)
         seen = finite & (measured > z + np.float32(margin))
-        self.shadowed[keys[rows[finite & ~seen]]] = True
+        # the rule added with the kernels: a voxel viewed into nothing (no return, no robot pixel around) is not
+        # shadowed again by later images
+        around_own = _nearest_around(np.where(own > 0, 1.0, np.nan).astype(np.float32)).reshape(-1)[pixel] == 1.0
+        self.into_nothing[keys[rows[~finite & ~around_own]]] = True
+        hidden = rows[finite & ~seen]
+        self.shadowed[keys[hidden[~self.into_nothing[keys[hidden]]]]] = True
         found = keys[rows[seen]]
         self.free[found] = True
         self.version += 1
@@ -216,7 +222,7 @@ def test_compiled_fusion_leaves_the_numpy_codes_voxel_states(robot, family, unkn
         a, b = compiled.grid, reference.grid
         np.testing.assert_array_equal(a.excluded_pixels, b.excluded_pixels)
         excluded += int(np.count_nonzero(a.excluded_pixels))
-        for state in ("occupied", "free", "viewed", "shadowed"):
+        for state in ("occupied", "free", "viewed", "shadowed", "into_nothing"):
             np.testing.assert_array_equal(getattr(a, state), getattr(b, state), err_msg=f"{state} after image {step}")
         if decay is not None:
             np.testing.assert_array_equal(a.seen, b.seen)
@@ -225,6 +231,7 @@ def test_compiled_fusion_leaves_the_numpy_codes_voxel_states(robot, family, unkn
     assert excluded > 100
     assert np.count_nonzero(compiled.grid.occupied) > 500
     assert unknown == "free" or np.count_nonzero(compiled.grid.free) > 10_000
+    assert unknown == "free" or np.count_nonzero(compiled.grid.into_nothing) > 1000
 
 
 def test_voxels_near_the_bodies_are_the_numpy_codes(robot) -> None:

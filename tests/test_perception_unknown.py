@@ -85,6 +85,33 @@ def test_the_grid_tells_free_seen_from_hidden_and_unviewed() -> None:
         OccupancyGrid(0.02, region=((5.0, 5.0, 5.0), (6.0, 6.0, 6.0)))
 
 
+def test_a_voxel_viewed_into_nothing_is_not_hidden_again_by_a_later_view() -> None:
+    """A camera views a voxel into nothing (no return around it): viewed, not counted. A later camera on the other
+    side of a wall sees the wall in front of that voxel: it hides the voxel from that camera only, the voxel stays
+    viewed into nothing (else views from other sides would hide again, round after round, what was viewed). A voxel
+    viewed only through the robot's own pixels is hidden by the same later view."""
+    region = ((0.0, -0.5, -0.5), (1.0, 0.5, 0.5))
+    scene = Scene()
+    scene.add("wall", Box((0.02, 0.4, 0.4)), ([0.4, 0.0, 0.0], [0, 0, 0, 1]))
+    grid = OccupancyGrid(0.02, region=region)
+    target = grid.keys(np.array([[0.7, 0.0, 0.0]]))[0]
+    above = look_at([0.7, 0.0, 0.8], [0.7, 0.0, -0.5])  # outside the region, looking down past the wall's side
+    nothing = np.full((SMALL.height, SMALL.width), np.nan, dtype=np.float32)
+    grid.mark_seen_free(nothing, SMALL.intrinsics, above, margin=0.02, max_range=3.0)
+    assert grid.viewed[target].all() and grid.into_nothing[target].all() and not grid.shadowed[target].any()
+    front = look_at([0.05, 0.0, 0.0], [1.0, 0.0, 0.0])  # the wall stands between this camera and the voxel
+    depth = render_depth(SMALL, front, scene)
+    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0)
+    assert not grid.shadowed[target].any() and target[0] not in set(grid.unknown_keys("occluded").tolist())
+
+    grid = OccupancyGrid(0.02, region=region)  # the first view only through the robot's own pixels
+    own = np.ones((SMALL.height, SMALL.width), dtype=bool)
+    grid.mark_seen_free(nothing, SMALL.intrinsics, above, margin=0.02, max_range=3.0, ignore=own)
+    assert grid.viewed[target].all() and not grid.into_nothing[target].any()
+    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0)
+    assert grid.shadowed[target].all() and target[0] in set(grid.unknown_keys("occluded").tolist())
+
+
 def test_a_board_seen_edge_on_blocks_its_whole_depth(robot: taplan.Robot) -> None:
     """Seen edge-on, only the board's front edge is hit. Unseen-as-free leaves most of the board free; with the
     default ``unknown="occluded"`` every point of the true board lies in space the planner avoids (the edge's

@@ -139,6 +139,88 @@ def test_a_goal_in_unseen_space_is_looked_at_before_planning(robot: taplan.Robot
     assert counted[unseen].sum() < len(unseen)  # images saw into the goal's space
 
 
+def test_views_the_capture_could_not_take_are_retried_with_fresh_candidates(robot: taplan.Robot) -> None:
+    """The first round's views cannot be taken (the capture returns None, e.g. no motion to them): the loop does
+    not give up, the next round chooses among fresh candidates, sees the goal's space and plans."""
+    perception = _seen_but_the_board(robot)
+    start, goal = robot.home, _goal_in_unseen(robot, perception)
+    render = RenderedViews(perception, board_scene(), camera=SMALL, seed=1)
+    refused: list[str] = []
+
+    def capture(frame: str, q: np.ndarray) -> tuple[np.ndarray, PinholeCamera] | None:
+        if not refused:
+            refused.append(frame)
+            return None
+        return render(frame, q)
+
+    seen = plan_seen(robot, perception, start, goal, capture, camera=SMALL, views_per_round=1, max_time=20.0, seed=1)
+    assert refused and seen.rounds[0].views == () and seen.rounds[0].resolved == 0
+    assert any(r.views and r.resolved > 0 for r in seen.rounds[1:])
+    assert np.allclose(seen.plan.trajectory(seen.plan.trajectory.duration), goal, atol=1e-6)
+    assert _true_clearance(perception, seen.plan.trajectory) > 0.0
+
+
+def _slot_around_the_hand(robot: taplan.Robot) -> tuple[Perception, np.ndarray, np.ndarray]:
+    """A map whose workspace is seen free but for two flat plates of voxels just above and just below the left
+    hand at home (8.7 mm and 11 mm from it: a slot narrower than twice the 1 cm margin, as depth noise and voxels
+    that overstate a surface make them), and a goal that slides the hand out of the slot."""
+    perception = Perception(robot, resolution=0.004, bounds=((0.2, -0.55, -0.7), (1.1, 0.55, 0.0)), workspace=WORKSPACE)
+    grid = perception.grid
+    grid.free[grid._region_keys] = True  # every workspace voxel seen free
+    starts, ends, radii = perception.robot_segments(robot.home)
+    hand = np.array([b.joint == robot.group("left").indices[-1] + 1 for b in perception.bodies])
+    assert hand.sum() >= 3
+    centre = (starts[hand] + ends[hand]).mean(axis=0) / 2
+    top = max(max(starts[k, 2], ends[k, 2]) + radii[k] for k in np.flatnonzero(hand))
+    bottom = min(min(starts[k, 2], ends[k, 2]) - radii[k] for k in np.flatnonzero(hand))
+    h = grid.resolution
+    side = np.arange(-0.08, 0.08, h / 2)
+    xy = np.stack(np.meshgrid(side, side, indexing="ij"), -1).reshape(-1, 2) + centre[:2]
+    for z in (top + 0.006 + h, bottom - 0.007 - h):
+        plate = np.column_stack([xy, np.full(len(xy), z)])
+        # not around the forearm and wrist: the plates face the hand only
+        far = np.ones(len(plate), dtype=bool)
+        for k in np.flatnonzero(~hand):
+            u = ends[k] - starts[k]
+            t = np.clip((plate - starts[k]) @ u / max(float(u @ u), 1e-12), 0.0, 1.0)
+            far &= np.linalg.norm(plate - (starts[k] + t[:, None] * u), axis=1) - radii[k] > 0.03
+        grid.insert(plate[far])
+    perception.update_scene()
+    idx = robot.group("left").indices
+    goal = robot.home.copy()
+    goal[idx[1]] -= 0.4  # the hand slides sideways out of the slot (the shoulder keeps its height)
+    goal[idx[0]] -= 0.4 * 0.143
+    return perception, robot.home.copy(), goal
+
+
+def test_a_start_in_a_slot_of_seen_voxels_keeps_what_a_bent_end_keeps(robot: taplan.Robot) -> None:
+    """The robot stands in a slot of seen voxels narrower than twice the margin: plan_motion refuses (no short
+    segment leads to margin clearance); plan_seen plans with the clearance a bent end keeps, floor + (d - floor) / 2
+    for the start's d, certifies it, and never comes closer to the voxels than a quarter of it."""
+    from taplan.errors import PlanningError
+    from taplan.planning import plan_motion
+    from taplan.planning.ends import DEFAULT_FLOOR
+
+    perception, start, goal = _slot_around_the_hand(robot)
+    world = CollisionWorld(robot, perception.scene)
+    d = world.min_distance(start)[0]
+    assert DEFAULT_FLOOR < d < 0.01  # inside the 1 cm margin, clear of the floor
+    with pytest.raises(PlanningError, match="no short certified segment"):
+        plan_motion(robot, start, goal, world=world, max_time=5.0)
+
+    def capture(frame: str, q: np.ndarray) -> None:
+        raise AssertionError("nothing is unseen: no view is needed")
+
+    seen = plan_seen(robot, perception, start, goal, capture, max_time=10.0)
+    assert seen.margin == pytest.approx(DEFAULT_FLOOR + (d - DEFAULT_FLOOR) / 2, abs=1e-9) and seen.margin < d
+    trajectory = seen.plan.trajectory
+    assert np.allclose(trajectory(0.0), start, atol=1e-6)
+    assert np.allclose(trajectory(trajectory.duration), goal, atol=1e-6)
+    assert seen.clearance >= seen.margin / 4
+    dense = [world.min_distance(trajectory(t))[0] for t in np.linspace(0.0, trajectory.duration, 200)]
+    assert min(dense) >= seen.margin / 4 - 1e-9
+
+
 def test_views_that_see_nothing_new_end_in_an_error_naming_the_unseen_space(robot: taplan.Robot) -> None:
     # all unseen space counts (with "occluded", what the robot's own bodies hide in an image counts as viewed)
     perception = _seen_but_the_board(robot, "occupied")

@@ -30,6 +30,7 @@ None and the view is skipped (two rounds without anything resolved end the looki
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -40,6 +41,7 @@ import numpy.typing as npt
 
 from taplan.errors import CollisionError, InvalidInputError, PlanningError, UnseenSpaceError
 from taplan.ik import solve_pose
+from taplan.planning.ends import DEFAULT_FLOOR, approach_segment
 from taplan.planning.motion import DEFAULT_MARGIN, MotionPlan, plan_motion
 from taplan.planning.verify import verify_trajectory
 from taplan.scene.camera import WRIST_DEPTH_CAMERA, PinholeCamera
@@ -49,6 +51,8 @@ from taplan.scene.scene import Scene
 from taplan.scene.world import CollisionWorld
 
 __all__ = ["plan_seen", "SeenPlan", "LookRound"]
+
+log = logging.getLogger(__name__)
 
 SWEEP_STEP = 0.04  # [rad] largest joint change between the configurations whose bodies make the swept space
 MAX_SWEEP = 150  # configurations sampled along a trajectory at most
@@ -82,6 +86,8 @@ class SeenPlan:
         plan_time, plan_cpu: The final plan's ``plan_motion`` time [s], wall and CPU of this process.
         total_time: The whole loop: every plan, view choice, capture and fusion, the certificate [s] (wall).
         clearance: The final plan's certified clearance to the occupied and unknown voxels [m].
+        margin: The margin the plans kept [m]: ``margin``, or less when the robot stood closer than that to seen
+            voxels with no short way out (see :func:`plan_seen`).
     """
 
     plan: MotionPlan
@@ -91,6 +97,7 @@ class SeenPlan:
     plan_cpu: float = 0.0
     total_time: float = 0.0
     clearance: float = 0.0
+    margin: float = DEFAULT_MARGIN
 
     @property
     def views(self) -> list[tuple[str, np.ndarray]]:
@@ -183,6 +190,32 @@ def _aimed(
     return out
 
 
+def _kept_margin(
+    robot: Any,
+    world: CollisionWorld,
+    ends: list[tuple[str, np.ndarray]],
+    active: np.ndarray,
+    margin: float,
+    floor: float,
+) -> float:
+    """The margin the plans can keep: ``margin``, or, when an end (the start, where the robot stands; a joint goal)
+    is closer than ``margin`` to what ``world`` holds and no short certified segment leads from it to ``margin``
+    clearance (plan_motion's bent ends), what such a segment keeps: ``floor + (d - floor) / 2`` for an end ``d``
+    from the nearest voxel. Seen voxels overstate a surface by up to a voxel and depth noise adds a few mm, so a
+    robot standing 1 cm from a surface may stand in a slot of voxels narrower than twice the margin: the plan then
+    keeps what a bent end would keep rather than refusing to move (an end inside ``floor`` is still refused)."""
+    limits = robot.planning_limits
+    kept = margin
+    for end, q in ends:
+        d = world.min_distance(q)[0]
+        if (
+            floor <= d < margin
+            and approach_segment(world, q, end, active, limits.lower, limits.upper, margin, floor) is None
+        ):
+            kept = min(kept, floor + (d - floor) / 2)
+    return kept
+
+
 def _describe(perception: Perception, keys: np.ndarray) -> str:
     centres = perception.grid.centers(keys)
     lo, hi = centres.min(axis=0), centres.max(axis=0)
@@ -197,7 +230,7 @@ def plan_seen(
     goal: npt.ArrayLike | Mapping[str, Any],
     capture: Callable[[str, np.ndarray], tuple[np.ndarray, PinholeCamera] | None],
     *,
-    rounds: int = 6,
+    rounds: int = 10,
     views_per_round: int = 4,
     samples: int = 400,
     aimed: int = 12,
@@ -219,7 +252,9 @@ def plan_seen(
             camera takes with the robot at that configuration (:class:`~taplan.scene.scan.RenderedViews` in a
             simulation; on the robot: move there in the seen space and return the next image), or None when it
             cannot go there.
-        rounds: Rounds of looking at most; views_per_round: views per round at most.
+        rounds: Rounds of looking at most; views_per_round: views per round at most. A round whose views resolve
+            nothing (none found, none captured, or none saw what was needed) is retried with fresh candidates,
+            twice as many random ones; the second such round in a row ends the looking.
         samples: Random candidate configurations per wrist camera for each round's view choice; aimed: candidates
             per wrist camera aimed at the unseen space by IK. The defaults (400, 12) found views for goals that 150
             and 6 did not (3 of 100 benchmark problems ended in UnseenSpaceError with them), for a loop about 0.8 s
@@ -261,8 +296,16 @@ def plan_seen(
     optimistic = CollisionWorld(robot, optimistic_scene)
     full = CollisionWorld(robot, perception.scene)
     widen = margin + perception.grid.resolution
+    floor = plan_options.get("floor", DEFAULT_FLOOR)
+    ends = [("start", q0)]
+    if isinstance(goal, Mapping):
+        active = np.arange(robot.nq)  # the goal configuration is the IK's: any joint may move
+    else:
+        ends.append(("goal", robot.check_configuration(goal, "goal")))
+        active = np.flatnonzero(np.abs(ends[1][1] - q0) > 1e-12)
+    margin = _kept_margin(robot, full, ends, active, margin, floor) if active.size else margin
     options = {"margin": margin, "max_time": max_time, "seed": seed, **plan_options}
-    log: list[LookRound] = []
+    rounds_log: list[LookRound] = []
     targets = np.zeros(0, dtype=np.int64)
     if not isinstance(goal, Mapping):  # a goal in unseen space: look at it first
         targets = _swept_unknown(perception, robot.check_configuration(goal, "goal")[None, :], widen)
@@ -288,7 +331,9 @@ def plan_seen(
                 check = verify_trajectory(full, plan.trajectory, margin / 4)
                 if check.collision_free:
                     total = time.perf_counter() - begin
-                    return SeenPlan(plan, True, tuple(log), plan_time, plan_cpu, total, check.min_clearance)
+                    return SeenPlan(
+                        plan, True, tuple(rounds_log), plan_time, plan_cpu, total, check.min_clearance, margin
+                    )
                 # unseen space just beyond the sampled sweep: look at what lies around the failing instant
                 t = np.clip(check.time + np.linspace(-0.1, 0.1, 9), 0.0, plan.trajectory.duration)
                 targets = _swept_unknown(perception, plan.trajectory(t), widen + perception.grid.resolution)
@@ -305,7 +350,7 @@ def plan_seen(
             base=q0,
             camera=camera,
             count=views_per_round,
-            samples=samples,
+            samples=samples * (1 + stalled),  # fresh candidates after a round that resolved nothing: more of them
             seed=seed + 7919 * (round_ + 1),
             clear_of=optimistic,  # not inside what was seen occupied (unseen space may hold the view: see below)
             extra=_aimed(robot, perception, points, q0, aimed, rng),
@@ -326,10 +371,19 @@ def plan_seen(
         perception.update_scene()
         _optimistic_scene(perception, optimistic_scene)
         resolved = int(np.count_nonzero(~_counted_unknown(perception)[targets]))
-        log.append(LookRound(len(targets), tuple(views), resolved, round_plan, time.perf_counter() - look_clock))
+        rounds_log.append(LookRound(len(targets), tuple(views), resolved, round_plan, time.perf_counter() - look_clock))
+        log.debug(
+            "round %d: %d unseen voxels, %d views, %d resolved, plan %.2f s, look %.2f s",
+            round_,
+            len(targets),
+            len(views),
+            resolved,
+            round_plan,
+            rounds_log[-1].look_time,
+        )
         stalled = stalled + 1 if resolved == 0 else 0
-        if not views or stalled == STALLS:
-            break  # nothing more to see from here: plan with the unseen space counted
+        if stalled == STALLS:
+            break  # fresh candidates saw nothing more either: plan with the unseen space counted
         if perception.grid.occupied[targets].any():
             plan = None  # something stands where the plan goes: plan again around it
         targets = np.zeros(0, dtype=np.int64)
@@ -341,10 +395,12 @@ def plan_seen(
         unseen = targets if len(targets) else _swept_unknown(perception, q0[None, :], widen)
         where = _describe(perception, unseen) if len(unseen) else "none near the start"
         raise UnseenSpaceError(
-            f"the motion needs space no view has seen free after {len(log)} round(s) of looking "
-            f"({sum(len(r.views) for r in log)} views): {where}; with that space counted as occupied: {exc}",
+            f"the motion needs space no view has seen free after {len(rounds_log)} round(s) of looking "
+            f"({sum(len(r.views) for r in rounds_log)} views): {where}; with that space counted as occupied: {exc}",
             perception.grid.centers(unseen),
         ) from exc
     plan_time, plan_cpu = time.perf_counter() - plan_clock, time.process_time() - cpu_clock
     total = time.perf_counter() - begin
-    return SeenPlan(plan, False, tuple(log), plan_time, plan_cpu, total, float(plan.report.min_clearance))
+    return SeenPlan(
+        plan, False, tuple(rounds_log), plan_time, plan_cpu, total, float(plan.report.min_clearance), margin
+    )

@@ -89,6 +89,7 @@ def judge_voxels(
     free: np.ndarray,
     viewed: np.ndarray,
     shadowed: np.ndarray,
+    into_nothing: np.ndarray,
     depth: np.ndarray,
     ignore: np.ndarray,
     R: np.ndarray,
@@ -131,18 +132,25 @@ def judge_voxels(
             continue
         row, col = int(v), int(u)
         measured = np.float32(np.inf)
+        own = False
         for rr in range(max(row - 1, 0), min(row + 2, H)):
             for cc in range(max(col - 1, 0), min(col + 2, W)):
                 value = depth[rr, cc]
-                if value == value and not ignore[rr, cc] and value < measured:
+                if ignore[rr, cc]:
+                    own = True
+                elif value == value and value < measured:
                     measured = value
         viewed[key] = True
         if measured == np.inf:
-            continue  # no measurement around: viewed into nothing
+            if not own:
+                into_nothing[key] = True  # no return around and none of the robot's pixels: nothing in front
+            continue
         if measured > z + margin:
             free[key] = True
             found += 1
-        else:
+        elif not into_nothing[key]:
+            # a surface in front of a voxel an earlier image viewed into nothing hides it from this camera only:
+            # it says nothing about the voxel (else views from other sides would hide again what was viewed)
             shadowed[key] = True
     return found
 

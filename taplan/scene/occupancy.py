@@ -449,6 +449,9 @@ class OccupancyGrid:
         self.free = np.zeros(cells, dtype=bool)  # known free (seen through, or the robot stood there)
         self.viewed = np.zeros(cells, dtype=bool)  # inside an image's view (within its range) at least once
         self.shadowed = np.zeros(cells, dtype=bool)  # an image saw a surface in front of it
+        # an image viewed it with no return around and none of the robot's pixels: later surfaces in front of it
+        # (seen from other sides) do not shadow it again
+        self.into_nothing = np.zeros(cells, dtype=bool)
         self._set_region(region)
 
     def _set_region(self, region: Any) -> None:
@@ -614,6 +617,7 @@ class OccupancyGrid:
         self.free[:] = False
         self.viewed[:] = False
         self.shadowed[:] = False
+        self.into_nothing[:] = False
         self.version += 1
 
     def mark_free(self, keys: np.ndarray) -> int:
@@ -665,6 +669,7 @@ class OccupancyGrid:
             self.free,
             self.viewed,
             self.shadowed,
+            self.into_nothing,
             np.ascontiguousarray(depth, dtype=np.float32),
             np.ascontiguousarray(ignore, dtype=bool),
             np.ascontiguousarray(T_root_camera[:3, :3], dtype=np.float32),
@@ -790,6 +795,7 @@ class OccupancyGrid:
         nothing = np.isnan(_nearest_around(raw).reshape(-1)[pixel])
         found = keys[rows[nothing]]
         self.shadowed[found] = False
+        self.into_nothing[found] = True
         if len(found):
             self.version += 1
         return len(found)
