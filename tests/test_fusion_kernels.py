@@ -1,7 +1,7 @@
 """Fusion's compiled kernels (taplan.scene.fusion_kernels) leave exactly the voxel states the numpy code they
 replaced left: ``NumpyGrid`` below is that code (OccupancyGrid's insert_image, mark_seen_free and near_segments as
-of main 8e912cf, plus the "viewed into nothing" rule added with them), run beside the compiled grid on the same rendered images (robot in view, noise, missing pixels,
-thick surfaces, stamps)."""
+of main 8e912cf, plus the "viewed into nothing" rule added with the kernels), run beside the compiled grid on the
+same rendered images (robot in view, noise, missing pixels, thick surfaces, stamps)."""
 
 from __future__ import annotations
 
