@@ -216,6 +216,22 @@ def _kept_margin(
     return kept
 
 
+def _plan_retried(
+    robot: Any, q0: np.ndarray, goal: Any, world: CollisionWorld, options: dict[str, Any]
+) -> tuple[MotionPlan, float, float]:
+    """``plan_motion`` in ``world``; a sampled search that ran out of time is tried once more with the next seed
+    (other random choices). Returns the plan and the successful call's wall and CPU time [s]."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    try:
+        plan = plan_motion(robot, q0, goal, world=world, **options)
+    except PlanningError as exc:
+        if "no collision-free path found within" not in str(exc):
+            raise
+        wall, cpu = time.perf_counter(), time.process_time()
+        plan = plan_motion(robot, q0, goal, world=world, **{**options, "seed": options["seed"] + 1})
+    return plan, time.perf_counter() - wall, time.process_time() - cpu
+
+
 def _describe(perception: Perception, keys: np.ndarray) -> str:
     centres = perception.grid.centers(keys)
     lo, hi = centres.min(axis=0), centres.max(axis=0)
@@ -264,7 +280,7 @@ def plan_seen(
             (``Perception.integrate_depth``): right for rendered images, where no return means nothing within
             range; a real depth camera also returns nothing from dark, shiny or too-close surfaces.
         margin, max_time, seed, plan_options: Passed to every ``plan_motion`` call (``max_time`` per call; an
-            optimistic plan that finds no path within it is tried once more with the next seed).
+            optimistic or conservative plan that finds no path within it is tried once more with the next seed).
 
     Returns:
         The plan, certified against the occupied and the counted unknown voxels, and how it was found.
@@ -314,17 +330,8 @@ def plan_seen(
     for round_ in range(rounds + 1):
         round_plan = 0.0
         if plan is None and not len(targets):
-            plan_clock, cpu_clock = time.perf_counter(), time.process_time()
-            try:
-                plan = plan_motion(robot, q0, goal, world=optimistic, **options)
-            except PlanningError as exc:
-                if "no collision-free path found within" not in str(exc):
-                    raise
-                # a sampled search that ran out of time: once more with other random choices
-                plan_clock, cpu_clock = time.perf_counter(), time.process_time()
-                plan = plan_motion(robot, q0, goal, world=optimistic, **{**options, "seed": options["seed"] + 1})
-            plan_time = round_plan = time.perf_counter() - plan_clock
-            plan_cpu = time.process_time() - cpu_clock
+            plan, plan_time, plan_cpu = _plan_retried(robot, q0, goal, optimistic, options)
+            round_plan = plan_time
         if plan is not None and not len(targets):
             targets = _swept_unknown(perception, _sweep(plan), widen)
             if not len(targets):
@@ -388,9 +395,8 @@ def plan_seen(
             plan = None  # something stands where the plan goes: plan again around it
         targets = np.zeros(0, dtype=np.int64)
     # the conservative fallback: unseen space is an obstacle
-    plan_clock, cpu_clock = time.perf_counter(), time.process_time()
     try:
-        plan = plan_motion(robot, q0, goal, world=full, **options)
+        plan, plan_time, plan_cpu = _plan_retried(robot, q0, goal, full, options)
     except (PlanningError, CollisionError) as exc:
         unseen = targets if len(targets) else _swept_unknown(perception, q0[None, :], widen)
         where = _describe(perception, unseen) if len(unseen) else "none near the start"
@@ -399,7 +405,6 @@ def plan_seen(
             f"({sum(len(r.views) for r in rounds_log)} views): {where}; with that space counted as occupied: {exc}",
             perception.grid.centers(unseen),
         ) from exc
-    plan_time, plan_cpu = time.perf_counter() - plan_clock, time.process_time() - cpu_clock
     total = time.perf_counter() - begin
     return SeenPlan(
         plan, False, tuple(rounds_log), plan_time, plan_cpu, total, float(plan.report.min_clearance), margin
