@@ -222,6 +222,14 @@ class Occupancy(Shape):
         """Per voxel its box ``(lo, hi)`` [m] in the obstacle frame; each (N, 3)."""
         return self._lo, self._lo + self.resolution
 
+    def contains(self, points: npt.ArrayLike) -> np.ndarray:
+        """Whether each point (P, 3) [m, obstacle frame] lies in an occupied voxel (a lookup in the voxels' dense
+        grid: no octree to build)."""
+        P = np.asarray(points, dtype=float).reshape(-1, 3)
+        if self._surface is None:
+            return np.zeros(len(P), dtype=bool)
+        return self._surface.inside(P)
+
     def to_coal(self) -> Any:
         """A coal octree of the voxel centres at this resolution (for coal-side queries and comparison)."""
         import coal
