@@ -166,3 +166,33 @@ def test_later_levels_evaluate_only_the_pairs_not_yet_certified_and_stay_sound(
         if valid:
             lowest = min(reference.min_distance(trajectory(t))[0] for t in np.linspace(0, trajectory.duration, 601))
             assert lowest > MARGIN / 4 - 1e-9
+
+
+def test_pairs_of_still_bodies_are_evaluated_once_per_curve(robot, world, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A right-arm trajectory: pairs whose members no moving joint carries (the left arm, the torso, the head) keep
+    their distance, so only the first configuration evaluates them; the verdict is the one of evaluating every
+    pair everywhere."""
+    from taplan.planning.motion import _full_trajectory
+
+    starts, ends = _segments(robot, world, 4)
+    arm = robot.group("right").indices
+    waypoints = np.array([starts[0], (starts[0] + ends[0]) / 2 + 0.1, ends[0]])[:, arm]
+    part = jerk_limited(waypoints, robot.planning_limits.subset(robot.group("right").joint_names)).trajectory
+    trajectory = _full_trajectory(part, robot.joint_names, arm, starts[0])  # as plan_motion embeds one arm's motion
+    requests: list[tuple[int, object]] = []
+    pair_distances = world.pair_distances
+
+    def spy(Q: np.ndarray, pairs: tuple | None = None, **kwargs: object) -> object:
+        requests.append((len(Q), pairs))
+        return pair_distances(Q, pairs, **kwargs)
+
+    monkeypatch.setattr(world, "pair_distances", spy)
+    check = verify_trajectory(world, trajectory, floor=MARGIN / 4)
+    assert requests[0] == (1, None)  # the first configuration: every pair
+    right = {body.name for body in world.bodies if body.name.startswith("right_")}
+    assert len(requests) > 1
+    for _, pairs in requests[1:]:
+        assert pairs is not None and all(a in right or b in right for a, b in pairs)
+    monkeypatch.setattr(world, "pair_distances", lambda *args, **kwargs: None)
+    full = verify_trajectory(world, trajectory, floor=MARGIN / 4)
+    assert (check.collision_free, check.min_clearance) == (full.collision_free, pytest.approx(full.min_clearance))

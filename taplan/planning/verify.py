@@ -218,9 +218,33 @@ def _certify_batch(
         batch = world.distance_matrix(Q, bound_beyond=BOUND_BEYOND)
         return record(curve, s, batch.pairs, batch.distance, batch.travel)
 
+    def first_level(
+        curve: np.ndarray, s: np.ndarray, evaluate: Callable[..., np.ndarray], rate: Callable[..., np.ndarray]
+    ) -> np.ndarray:
+        """The grid's distances. When some joints stay still along every curve (one arm planned), a pair whose rate
+        is 0 along a curve (no moving joint carries either member: the other arm, the torso, the head) keeps its
+        distance: evaluated at each curve's first point only, +inf at the others (that value, checked, holds
+        along the whole curve); the other pairs everywhere."""
+        first = np.concatenate([[0], np.cumsum([len(g) for g in grids])[:-1]])
+        ends = np.array([g[-1] for g in grids])
+        nv = world.model.nv
+        still = ~np.any(rate(np.arange(count), s[first], ends, np.eye(nv)) > 0.0, axis=0)  # joints never moved
+        rest = np.setdiff1d(np.arange(len(s)), first)
+        if not still.any() or not rest.size:
+            return evaluate(curve, s)
+        at_first = evaluate(curve[first], s[first])
+        moved = np.flatnonzero(np.any(rate(np.arange(count), s[first], ends, travel) > 0.0, axis=0))
+        d = np.full((len(s), len(columns)), np.inf)
+        d[first] = at_first
+        if moved.size:
+            d_rest = evaluate(curve[rest], s[rest], moved)
+            d = _pad(d, d_rest.shape[1])
+            d[rest] = d_rest
+        return d
+
     curve = np.concatenate([np.full(len(g), k) for k, g in enumerate(grids)])
     s = np.concatenate(grids)
-    d = evaluate(curve, s) if known is None else record(curve, s, *known, count=False)
+    d = first_level(curve, s, evaluate, rate) if known is None else record(curve, s, *known, count=False)
     # the intervals between consecutive grid points of the same curve
     same = curve[:-1] == curve[1:]
     i_curve, a, b = curve[:-1][same], s[:-1][same], s[1:][same]
