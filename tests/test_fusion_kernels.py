@@ -103,6 +103,7 @@ class NumpyGrid(OccupancyGrid):
         *,
         max_range: float = math.inf,
         ignore: np.ndarray | None = None,
+        keep_into_nothing: bool = False,
     ) -> int:
         """Update the region's unknown voxels from a depth image (metres, NaN = no measurement). Each voxel is
         judged by the nearest valid depth of the 3x3 pixels around its centre's (a missing pixel, or a voxel wider
@@ -147,7 +148,9 @@ class NumpyGrid(OccupancyGrid):
         around_own = _nearest_around(np.where(own > 0, 1.0, np.nan).astype(np.float32)).reshape(-1)[pixel] == 1.0
         self.into_nothing[keys[rows[~finite & ~around_own]]] = True
         hidden = rows[finite & ~seen]
-        self.shadowed[keys[hidden[~self.into_nothing[keys[hidden]]]]] = True
+        if keep_into_nothing:
+            hidden = hidden[~self.into_nothing[keys[hidden]]]
+        self.shadowed[keys[hidden]] = True
         found = keys[rows[seen]]
         self.free[found] = True
         self.version += 1
@@ -197,10 +200,15 @@ def _views(robot: taplan.Robot, count: int, seed: int) -> list[tuple[str, np.nda
 
 
 @pytest.mark.parametrize(
-    ("family", "unknown", "thickness", "decay"),
-    [("table_box", "occluded", 0.0, None), ("shelf", "occupied", 0.03, 5.0), ("poles", "free", 0.0, None)],
+    ("family", "unknown", "thickness", "decay", "nothing"),
+    [
+        ("table_box", "occluded", 0.0, None, False),
+        ("poles", "occluded", 0.0, None, True),
+        ("shelf", "occupied", 0.03, 5.0, False),
+        ("poles", "free", 0.0, None, False),
+    ],
 )
-def test_compiled_fusion_leaves_the_numpy_codes_voxel_states(robot, family, unknown, thickness, decay) -> None:
+def test_compiled_fusion_leaves_the_numpy_codes_voxel_states(robot, family, unknown, thickness, decay, nothing) -> None:
     scene = make_scene(family, np.random.default_rng(3))
     compiled = Perception(robot, resolution=0.02, unknown=unknown, thickness=thickness, decay=decay)
     reference = Perception(robot, resolution=0.02, unknown=unknown, thickness=thickness, decay=decay)
@@ -214,7 +222,9 @@ def test_compiled_fusion_leaves_the_numpy_codes_voxel_states(robot, family, unkn
             CAMERA, T, scene, capsules=zip(starts, ends, radii, strict=True), noise=0.003, missing=0.03, rng=rng
         )
         answers = [
-            p.integrate_depth(depth, CAMERA, frame=frame, q=q, stamp=0.5 * step, robot_there=step % 3 != 0)
+            p.integrate_depth(
+                depth, CAMERA, frame=frame, q=q, stamp=0.5 * step, robot_there=step % 3 != 0, nothing_unshadows=nothing
+            )
             for p in (compiled, reference)
         ]
         assert answers[0].measured == answers[1].measured and answers[0].kept == answers[1].kept

@@ -87,9 +87,10 @@ def test_the_grid_tells_free_seen_from_hidden_and_unviewed() -> None:
 
 def test_a_voxel_viewed_into_nothing_is_not_hidden_again_by_a_later_view() -> None:
     """A camera views a voxel into nothing (no return around it): viewed, not counted. A later camera on the other
-    side of a wall sees the wall in front of that voxel: it hides the voxel from that camera only, the voxel stays
-    viewed into nothing (else views from other sides would hide again, round after round, what was viewed). A voxel
-    viewed only through the robot's own pixels is hidden by the same later view."""
+    side of a wall sees the wall in front of that voxel: where no return means nothing (``keep_into_nothing``, as
+    for rendered images) it hides the voxel from that camera only, the voxel stays viewed into nothing (else views
+    from other sides would hide again, round after round, what was viewed); otherwise it is shadowed. A voxel viewed
+    only through the robot's own pixels is hidden by the later view either way."""
     region = ((0.0, -0.5, -0.5), (1.0, 0.5, 0.5))
     scene = Scene()
     scene.add("wall", Box((0.02, 0.4, 0.4)), ([0.4, 0.0, 0.0], [0, 0, 0, 1]))
@@ -101,14 +102,16 @@ def test_a_voxel_viewed_into_nothing_is_not_hidden_again_by_a_later_view() -> No
     assert grid.viewed[target].all() and grid.into_nothing[target].all() and not grid.shadowed[target].any()
     front = look_at([0.05, 0.0, 0.0], [1.0, 0.0, 0.0])  # the wall stands between this camera and the voxel
     depth = render_depth(SMALL, front, scene)
-    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0)
+    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0, keep_into_nothing=True)
     assert not grid.shadowed[target].any() and target[0] not in set(grid.unknown_keys("occluded").tolist())
+    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0)  # no return may be a dark surface
+    assert grid.shadowed[target].all()
 
     grid = OccupancyGrid(0.02, region=region)  # the first view only through the robot's own pixels
     own = np.ones((SMALL.height, SMALL.width), dtype=bool)
     grid.mark_seen_free(nothing, SMALL.intrinsics, above, margin=0.02, max_range=3.0, ignore=own)
     assert grid.viewed[target].all() and not grid.into_nothing[target].any()
-    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0)
+    grid.mark_seen_free(depth, SMALL.intrinsics, front, margin=0.02, max_range=3.0, keep_into_nothing=True)
     assert grid.shadowed[target].all() and target[0] in set(grid.unknown_keys("occluded").tolist())
 
 

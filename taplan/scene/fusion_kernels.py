@@ -98,6 +98,7 @@ def judge_voxels(
     margin: np.float32,
     near: np.float32,
     max_range: np.float32,
+    keep_into_nothing: bool,
 ) -> int:
     """The region voxels' known-free / viewed / shadowed update of one depth image (see
     :meth:`OccupancyGrid.mark_seen_free`): each unknown candidate voxel's centre (float32, camera at ``R``, ``t``)
@@ -148,9 +149,9 @@ def judge_voxels(
         if measured > z + margin:
             free[key] = True
             found += 1
-        elif not into_nothing[key]:
-            # a surface in front of a voxel an earlier image viewed into nothing hides it from this camera only:
-            # it says nothing about the voxel (else views from other sides would hide again what was viewed)
+        elif not (keep_into_nothing and into_nothing[key]):
+            # (kept: a surface in front of a voxel an earlier image viewed into nothing hides it from this camera
+            # only; else views from other sides would hide again, round after round, what was looked at)
             shadowed[key] = True
     return found
 

@@ -647,6 +647,7 @@ class OccupancyGrid:
         *,
         max_range: float = math.inf,
         ignore: np.ndarray | None = None,
+        keep_into_nothing: bool = False,
     ) -> int:
         """Update the region's unknown voxels from a depth image (metres, NaN = no measurement). Each voxel is
         judged by the nearest valid depth of the 3x3 pixels around its centre's (a missing pixel, or a voxel wider
@@ -655,8 +656,10 @@ class OccupancyGrid:
         ``shadowed`` when it is not (a surface is in front of the voxel or in it); ``viewed`` when the centre
         projects into the image within ``max_range`` (a voxel viewed only through pixels without any measurement
         around them, looking into nothing, is neither). ``ignore``: a mask of pixels taken as no measurement (the
-        robot's own bodies: they free nothing and, in this mode, shadow nothing). Returns how many became known
-        free."""
+        robot's own bodies: they free nothing and, in this mode, shadow nothing). A voxel viewed into nothing (no
+        valid depth and no ``ignore`` pixel around) is recorded in ``into_nothing``; with ``keep_into_nothing`` (no
+        return taken as nothing within range, as for rendered images) such a voxel is not shadowed by this image.
+        Returns how many became known free."""
         keys = self._region_keys
         if not len(keys):
             return 0
@@ -686,6 +689,7 @@ class OccupancyGrid:
             np.float32(margin),
             np.float32(1e-3),
             np.float32(max_range),
+            bool(keep_into_nothing),
         )
         self.version += 1
         return found

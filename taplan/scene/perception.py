@@ -244,7 +244,8 @@ class Perception:
                 free; False (an image rendered at a configuration the robot did not move to): only the image
                 marks space known free (the bodies still filter their own points).
             nothing_unshadows: With ``unknown="occluded"``: shadowed voxels this image views into nothing (no
-                return around their pixel; see :meth:`OccupancyGrid.unshadow_seen_into_nothing`) no longer count.
+                return around their pixel; see :meth:`OccupancyGrid.unshadow_seen_into_nothing`) no longer count,
+                and voxels an image viewed into nothing are not shadowed again by this one.
                 Right for rendered images; a real camera also returns nothing from dark or too-close surfaces.
         """
         camera = camera if isinstance(camera, PinholeCamera) else PinholeCamera.from_camera_info(camera)
@@ -280,8 +281,15 @@ class Perception:
             # "occluded": what the robot's own bodies hide counts as viewed, not as hidden (the wrist camera's own
             # gripper fills a quarter of every image); "occupied" counts only what was seen past
             ignore = self.grid.excluded_pixels if self.unknown == "occluded" else None
+            unshadow = nothing_unshadows and self.unknown == "occluded"
             self.grid.mark_seen_free(
-                depth, camera.intrinsics, T, self.free_margin, max_range=self.max_range, ignore=ignore
+                depth,
+                camera.intrinsics,
+                T,
+                self.free_margin,
+                max_range=self.max_range,
+                ignore=ignore,
+                keep_into_nothing=unshadow,  # what an image viewed into nothing is not shadowed again
             )
             if nothing_unshadows and self.unknown == "occluded":
                 self.grid.unshadow_seen_into_nothing(
