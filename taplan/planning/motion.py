@@ -26,8 +26,8 @@
 4. **Timing**: a straight segment gets the time-optimal jerk-limited motion along it
    (:func:`~taplan.timing.straight.straight_line`, ruckig); a polyline :func:`~taplan.timing.jerk_limited`
    (densified so that its spline stays near the segments), interior corners cut by at most ``max_deviation``.
-5. **Verification**: the timed trajectory is certified at every instant (conservative advancement with the exact
-   peak joint speeds), never only at waypoints. If the first (fastest) timing comes closer than ``margin / 4``, the
+5. **Verification**: the timed trajectory is certified at every instant (conservative advancement with bounds
+   of the joint speeds), never only at waypoints. If the first (fastest) timing comes closer than ``margin / 4``, the
    other timings (half the limits, corners cut less on a denser path, a quarter of the limits, exact waypoints) are
    computed and verified shortest first, so the fallback is the fastest safe one, and ``report.timing_fallback``
    says which and why; a plan that fails is never returned: PlanningError.

@@ -5,9 +5,9 @@ The distance of each pair (robot body, obstacle or other body) changes by at mos
 configurations (``travel_p``: the reach of every joint that moves either member, :class:`~taplan.scene.Distances`),
 so a step that keeps ``travel_p · |Δq| < d_p − floor`` for every pair keeps at least ``floor`` of clearance all along
 it. Stepping like that certifies a whole segment or trajectory, not only its samples (conservative advancement).
-Along a timed trajectory ``|Δq_j|`` over ``Δt`` is bounded by ``Δt · max|q̇_j|`` with the exact peak speeds of the
-polynomial pieces in the window, and the distances at both ends of an interval bound it from both sides (the
-interval is halved until the bound holds).
+Along a timed trajectory ``|Δq_j|`` over ``Δt`` is bounded by ``Δt · max|q̇_j|`` with bounds of the speeds of the
+polynomial pieces in the window (their Bernstein coefficients), and the distances at both ends of an interval bound
+it from both sides (the interval is split until the bound holds).
 
 Both certificates work on whole batches (:func:`_certify_batch`): every configuration a level of halving needs, for
 every segment or window at once, is one call of the world's batched distances (:mod:`taplan.scene.engine`), so a
