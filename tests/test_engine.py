@@ -3,6 +3,8 @@ Jacobians equal to the reference and to finite differences, both kinematics path
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -411,3 +413,33 @@ def test_pair_distances_leave_attached_pairs_to_the_full_batch(robot: taplan.Rob
     assert world.pair_distances(Q, (robot_pair, tool_pair)) is None
     assert world.pair_distances(Q) is None  # every pair includes the attached object's
     assert CollisionWorld(robot, scene, engine=False).pair_distances(Q, (robot_pair,)) is None
+
+
+def test_worlds_with_the_same_bodies_share_one_kernel_and_other_bodies_get_their_own(robot: taplan.Robot) -> None:
+    from taplan.scene.engine import _native_kernel
+
+    first = _native_kernel(CollisionWorld(robot, _scene(0)))
+    if first is None:
+        pytest.skip("no C compiler: the numpy path has no kernel to share")
+    assert _native_kernel(CollisionWorld(robot)) is first  # obstacles are not part of the kernel
+    world = CollisionWorld(robot, gripper="closed")  # other finger bodies: another chain
+    assert _native_kernel(world) is not first
+    Q = _configurations(robot, 3, 11)
+    ends, _rows = DistanceEngine(world).segments(Q)
+    fallback = _Kinematics.__new__(_Kinematics)
+    fallback.world, fallback.model, fallback.nv, fallback.B = world, world.model, world.model.nv, len(world.bodies)
+    ends_ref, _ = fallback._pinocchio(Q, True)
+    np.testing.assert_allclose(ends, ends_ref, rtol=0, atol=1e-12)  # [m]: the closed fingers' own end points
+
+
+def test_the_compiler_lookup_follows_cc_and_path(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from taplan.ik import _native
+
+    monkeypatch.setenv("PATH", str(tmp_path))  # an empty directory: no compiler at all
+    monkeypatch.delenv("CC", raising=False)
+    assert _native._compiler() is None and not _native.native_enabled()
+    fake = tmp_path / "mycc"
+    fake.write_text("#!/bin/sh\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("CC", "mycc")
+    assert _native._compiler() == "mycc"

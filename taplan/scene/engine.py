@@ -704,7 +704,7 @@ class _Kinematics:
         return ends, rows
 
 
-_kernels: dict[str, Any] = {}
+_kernels: dict[tuple[Any, ...], Any] = {}
 # held around every use of a kernel's buffers: the compiled call releases the GIL (ctypes), and worlds of one robot
 # share a kernel across threads (a viewer's playback thread and a planner, say)
 KERNEL_LOCK = threading.Lock()
@@ -720,16 +720,16 @@ def _native_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, 
     if not native_enabled():
         return None
     model = world.model
-    key = repr(
-        (
-            model.name,
-            model.nq,
-            [
-                (j.idx_q, p.translation.tolist(), p.rotation.tolist())
-                for j, p in zip(model.joints, model.jointPlacements, strict=True)
-            ],
-            [(b.joint, np.round(b.start, 12).tolist(), np.round(b.end, 12).tolist()) for b in world.bodies],
-        )
+    # one key per model and body set, built from whole arrays (a new world per plan asks: ~0.1 ms instead of ~1.6)
+    placements = np.array([p.homogeneous for p in model.jointPlacements])
+    ends = np.round(np.array([(b.start, b.end) for b in world.bodies], dtype=float), 12) + 0.0  # + 0.0: no -0.0
+    key = (
+        model.name,
+        model.nq,
+        np.array([j.idx_q for j in model.joints]).tobytes(),
+        placements.tobytes(),
+        tuple(b.joint for b in world.bodies),
+        ends.tobytes(),
     )
     if key not in _kernels:
         _kernels[key] = _checked_kernel(world)
