@@ -109,14 +109,7 @@ def test_skipping_the_contained_trust_regions_gives_the_same_path(robot, monkeyp
     start, goal = problem.start, problem.goal_q
     active = np.flatnonzero(np.abs(goal - start) > 1e-12)
     limits = robot.planning_limits
-    solves: list[int] = []
-    original_solve = optimize_module.qpsolvers.solve_qp
-
-    def counted(*args, **kwargs):
-        solves.append(1)
-        return original_solve(*args, **kwargs)
-
-    monkeypatch.setattr(optimize_module.qpsolvers, "solve_qp", counted)
+    solves = _solves(monkeypatch)
     skipping = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
     skipped_solves = len(solves)
     solves.clear()

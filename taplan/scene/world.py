@@ -520,28 +520,14 @@ class CollisionWorld:
 
     def _with_attached(self, batch: Any, Q: np.ndarray, bound_beyond: float) -> Any:
         """The engine's batch plus the attached objects' pairs (:meth:`_attached_many`)."""
-        from taplan.scene.engine import BatchDistances
-
         E, _ = self.engine().segments(Q, jacobian=False)  # the bodies' end points, as the engine's batch has them
         names, d, pa, pb, normal, owner_a, owner_b, travel, _ = self._attached_many(Q, E, bound_beyond, False)
-        return BatchDistances(
-            batch.pairs + tuple(names),
-            np.hstack([batch.distance, d]),
-            np.concatenate([batch.point_a, pa], axis=1),
-            np.concatenate([batch.point_b, pb], axis=1),
-            np.concatenate([batch.normal, normal], axis=1),
-            None,
-            np.vstack([batch.travel, travel]),
-            np.concatenate([batch.owner_a, owner_a]),
-            np.concatenate([batch.owner_b, owner_b]),
-        )
+        return _joined(batch, names, d, pa, pb, normal, None, travel, owner_a, owner_b)
 
     def _with_attached_rows(self, batch: Any, Q: np.ndarray, cutoff: float) -> Any:
         """The engine's batch (with Jacobians) plus the attached objects' pairs (:meth:`_attached_many`, bounded
         beyond ``cutoff``) and their Jacobian rows within ``cutoff``: :meth:`distances_many`'s pairs without a
         :class:`Distances` per configuration, and the robot's own pairs batched."""
-        from taplan.scene.engine import BatchDistances
-
         E, _ = self.engine().segments(Q, jacobian=False)  # the bodies' end points, as the engine's batch has them
         names, distance, point_a, point_b, normal, owner_a, owner_b, travel, J = self._attached_many(Q, E, cutoff, True)
         N, A, nv = len(Q), len(names), self.model.nv
@@ -554,17 +540,7 @@ class CollisionWorld:
                 row = n_ @ J[:, :3] + np.cross(p_, n_) @ J[:, 3:]
                 rows[:, moving] += sign * row * self._support[owner[moving]][None]
         rows[distance > cutoff] = 0.0  # as the engine's: rows only within the cutoff
-        return BatchDistances(
-            batch.pairs + tuple(names),
-            np.hstack([batch.distance, distance]),
-            np.concatenate([batch.point_a, point_a], axis=1),
-            np.concatenate([batch.point_b, point_b], axis=1),
-            np.concatenate([batch.normal, normal], axis=1),
-            np.concatenate([batch.jacobian, rows], axis=1),
-            np.vstack([batch.travel, travel]),
-            np.concatenate([batch.owner_a, owner_a]),
-            np.concatenate([batch.owner_b, owner_b]),
-        )
+        return _joined(batch, names, distance, point_a, point_b, normal, rows, travel, owner_a, owner_b)
 
     def _from_batch(self, batch: Any, n: int, cutoff: float) -> Distances:
         """Configuration ``n`` of an engine batch as :class:`Distances` (pairs within ``cutoff``, the world's order)."""
@@ -1080,6 +1056,34 @@ class CollisionWorld:
         self._refresh()
         dq = np.abs(np.asarray(q_b, dtype=float) - np.asarray(q_a, dtype=float))
         return float(self.reach @ dq)
+
+
+def _joined(
+    batch: Any,
+    names: list[tuple[str, str]],
+    distance: np.ndarray,
+    point_a: np.ndarray,
+    point_b: np.ndarray,
+    normal: np.ndarray,
+    rows: np.ndarray | None,
+    travel: np.ndarray,
+    owner_a: np.ndarray,
+    owner_b: np.ndarray,
+) -> Any:
+    """The engine's batch with the attached objects' pair columns after its own (Jacobian rows when ``rows``)."""
+    from taplan.scene.engine import BatchDistances
+
+    return BatchDistances(
+        batch.pairs + tuple(names),
+        np.hstack([batch.distance, distance]),
+        np.concatenate([batch.point_a, point_a], axis=1),
+        np.concatenate([batch.point_b, point_b], axis=1),
+        np.concatenate([batch.normal, normal], axis=1),
+        None if rows is None else np.concatenate([batch.jacobian, rows], axis=1),
+        np.vstack([batch.travel, travel]),
+        np.concatenate([batch.owner_a, owner_a]),
+        np.concatenate([batch.owner_b, owner_b]),
+    )
 
 
 def _segment_frame(start: np.ndarray, end: np.ndarray) -> np.ndarray:
