@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from planning_helpers import blocked_problem
 
 import taplan
-from taplan.planning import check_segment
 from taplan.planning import optimize as optimize_module
 from taplan.planning.optimize import _evaluate, _Problem, optimize_path
 from taplan.scene import Box, CollisionWorld, Scene
@@ -30,21 +30,6 @@ def world(robot) -> CollisionWorld:
     return CollisionWorld(robot, scene)
 
 
-def _blocked(robot: taplan.Robot, world: CollisionWorld) -> tuple[np.ndarray, np.ndarray]:
-    """A left-arm start and goal on either side of the panel whose straight segment is blocked (seeded)."""
-    rng = np.random.default_rng(3)
-    limits = robot.planning_limits
-    idx = robot.group("left").indices
-    for _ in range(2000):
-        a, b = robot.home.copy(), robot.home.copy()
-        a[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
-        b[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
-        free = world.min_distance(a)[0] > 0.015 and world.min_distance(b)[0] > 0.015
-        if free and not check_segment(world, a, b, MARGIN).valid:
-            return a, b
-    raise AssertionError("no blocked problem found")
-
-
 @pytest.mark.parametrize(("K", "n"), [(3, 7), (6, 7), (12, 14)])
 def test_qp_cost_equals_the_sparse_difference_formulation(K: int, n: int) -> None:
     rng = np.random.default_rng(K)
@@ -63,7 +48,7 @@ def test_qp_cost_equals_the_sparse_difference_formulation(K: int, n: int) -> Non
 
 
 def test_engine_evaluations_equal_the_per_configuration_ones(robot, world, monkeypatch) -> None:
-    start, goal = _blocked(robot, world)
+    start, goal = blocked_problem(robot, world, MARGIN)
     active = robot.group("left").indices
     path = np.linspace(start[active], goal[active], 9)
     fast, known = _evaluate(world, start, path, active, 0.06)
@@ -78,7 +63,7 @@ def test_engine_evaluations_equal_the_per_configuration_ones(robot, world, monke
 
 
 def test_the_certificate_from_the_last_evaluation_gives_the_same_certified_path(robot, world, monkeypatch) -> None:
-    start, goal = _blocked(robot, world)
+    start, goal = blocked_problem(robot, world, MARGIN)
     active = robot.group("left").indices
     limits = robot.planning_limits
     reused = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from planning_helpers import blocked_problem
 
 import taplan
 from taplan.errors import CollisionError, InvalidInputError, PlanningError
@@ -43,25 +44,10 @@ def _dense_min_distance(world: CollisionWorld, trajectory: taplan.Trajectory, tr
     return min(lowest, world.min_distance(trajectory(trajectory.duration))[0])
 
 
-def _blocked_problem(robot: taplan.Robot, world: CollisionWorld) -> tuple[np.ndarray, np.ndarray]:
-    """A left-arm start and goal on either side of the panel, whose straight segment is blocked (seeded search)."""
-    rng = np.random.default_rng(3)
-    limits = robot.planning_limits
-    idx = robot.group("left").indices
-    for _ in range(2000):
-        a, b = robot.home.copy(), robot.home.copy()
-        a[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
-        b[idx] = limits.lower[idx] + rng.uniform(0.1, 0.9, 7) * (limits.upper[idx] - limits.lower[idx])
-        free = world.min_distance(a)[0] > 0.015 and world.min_distance(b)[0] > 0.015  # home arms: 19 mm [m]
-        if free and not check_segment(world, a, b, 0.01).valid:
-            return a, b
-    raise AssertionError("no blocked problem found")
-
-
 def test_plan_around_obstacles_is_certified_and_within_limits(robot) -> None:
     scene = _table_and_panel()
     world = CollisionWorld(robot, scene)
-    start, goal = _blocked_problem(robot, world)
+    start, goal = blocked_problem(robot, world)
     plan = plan_motion(robot, start, goal, world=world, seed=1)
     report = plan.report
     assert report.success and report.stage in ("optimization", "rrt-connect")
@@ -136,7 +122,7 @@ def test_bad_inputs(robot) -> None:
 def test_verification_rejects_a_trajectory_through_an_obstacle(robot) -> None:
     scene = _table_and_panel()
     world = CollisionWorld(robot, scene)
-    start, goal = _blocked_problem(robot, world)
+    start, goal = blocked_problem(robot, world)
     straight = jerk_limited(np.array([start, goal]), robot.planning_limits).trajectory
     verdict = verify_trajectory(world, straight, floor=0.0)
     assert not verdict.collision_free
@@ -169,7 +155,7 @@ def test_optimizer_pushes_the_straight_line_out_of_collision(robot) -> None:
     from taplan.planning.optimize import optimize_path
 
     world = CollisionWorld(robot, _table_and_panel())
-    start, goal = _blocked_problem(robot, world)
+    start, goal = blocked_problem(robot, world)
     active = robot.group("left").indices
     limits = robot.planning_limits
     straight_clearance = _polyline_min_distance(world, np.array([start, goal]), travel=5e-3)
@@ -211,7 +197,7 @@ def test_optimizer_as_smoother_shortens_a_detour(robot) -> None:
 
 def test_stages_select_the_path_search_and_bad_stages_are_named(robot) -> None:
     world = CollisionWorld(robot, _table_and_panel())
-    start, goal = _blocked_problem(robot, world)
+    start, goal = blocked_problem(robot, world)
     sampled = plan_motion(robot, start, goal, world=world, stages=("rrt-connect",), seed=2)
     assert sampled.report.stage == "rrt-connect"
     assert sampled.report.stage_times["optimize"] == 0.0 and sampled.report.stage_times["straight"] == 0.0
