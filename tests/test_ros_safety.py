@@ -7,11 +7,13 @@ listening on the robot's side would).
 
 from __future__ import annotations
 
+import argparse
 import random
 import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,9 @@ import yaml
 import taplan
 from taplan import api
 from taplan.clearance import teleavatar_world
+from taplan.errors import InvalidInputError
 from taplan.ros.dds import DdsInterface, loopback_config
+from taplan.ros.interface import FakeRosInterface
 from taplan.ros.msg_definitions import FSM_STATE_TOPIC, INT32
 from taplan.ros.runner import CheckFailedError, RunError, Runner, RunnerConfig
 from taplan.stream import PoseStreamer
@@ -72,6 +76,7 @@ class CommandListener:
 
 def _cli_run(sim, *arguments: str) -> subprocess.CompletedProcess:
     command = [sys.executable, "-m", "taplan", "run", *arguments, "--loopback", "--domain-id", str(sim.domain)]
+    command += test_ros_run.STEADY_CLI
     return subprocess.run(command, capture_output=True, text=True, timeout=120)
 
 
@@ -119,7 +124,7 @@ def test_hostile_streamed_targets_never_leave_the_limits_or_enter_the_torso(robo
     sim = start_sim()
     listener = CommandListener(sim.domain)
     interface = DdsInterface(sim.domain, config=loopback_config())
-    runner = Runner(interface, robot)
+    runner = Runner(interface, robot, config=test_ros_run.STEADY)
     start = runner.wait_for_state()
     jump = start.copy()
     jump[1] += 1.5  # a 1.5 rad jump of l_joint2 in one target
@@ -211,7 +216,7 @@ def test_an_outside_disable_wins_over_a_running_plan(robot, start_sim) -> None:
     sim = start_sim()
     operator = Operator(sim.domain)
     interface = DdsInterface(sim.domain, config=loopback_config())
-    runner = Runner(interface, robot)
+    runner = Runner(interface, robot, config=test_ros_run.STEADY)
     start = runner.wait_for_state()
     plan = test_ros_run._plan(robot, start, 0.8, legs=3)  # about 3 s
     operator.disable_when_driving(0.8)
@@ -341,7 +346,7 @@ def test_commanded_velocity_is_a_documented_choice(robot, start_sim, mode: str) 
     sim = start_sim()
     listener = CommandListener(sim.domain)
     interface = DdsInterface(sim.domain, config=loopback_config())
-    runner = Runner(interface, robot, config=RunnerConfig(command_velocity=mode))
+    runner = Runner(interface, robot, config=replace(test_ros_run.STEADY, command_velocity=mode))
     start = runner.wait_for_state()
     plan = test_ros_run._plan(robot, start, 0.3)
     result = runner.execute(plan)
@@ -533,3 +538,45 @@ def test_a_plan_that_does_not_start_at_the_robot_is_refused_before_anything_is_s
     interface.close()
     sent = listener.close()
     assert len(sent["left"]) == 0 and len(sent["right"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("config", "period", "expected"),
+    [
+        (RunnerConfig(), 0.010, 0.2),  # 5 periods = 50 ms, raised to the 200 ms floor
+        (RunnerConfig(state_timeout=1.0), 0.010, 0.2),  # the ceiling alone does not lengthen a 100 Hz stall
+        (RunnerConfig(state_timeout=1.0), 0.100, 0.5),  # 5 periods of a 10 Hz robot
+        (RunnerConfig(state_timeout=1.0, stale_periods=float("inf")), 0.010, 1.0),  # taplan run --state-timeout 1
+        (RunnerConfig(state_timeout=0.1, stale_periods=float("inf")), 0.010, 0.1),
+    ],
+)
+def test_the_stall_time_follows_the_measured_period_and_the_config(robot, config, period, expected) -> None:
+    fake = FakeRosInterface()
+    runner = Runner(fake, robot, config=config, clock=fake.now)
+    for _ in range(200):  # both arms, long enough for the smoothed period to settle
+        fake.advance(period)
+        for side in api.SIDES:
+            fake.deliver(api.Topics.joint_states(side), {"name": [], "position": [0.0] * 7})
+    assert runner.stale_after() == pytest.approx(expected, abs=1e-6)  # [s]
+
+
+def test_the_cli_state_timeout_is_the_stall_time() -> None:
+    """``taplan run --state-timeout S`` stops after S without states, whatever the robot's rate."""
+    from taplan.commands import run as run_command
+
+    parser = argparse.ArgumentParser()
+    run_command.add_arguments(parser)
+    config = run_command.runner_config(parser.parse_args(["--hold", "1", "--state-timeout", "0.7"]))
+    fake = FakeRosInterface()
+    runner = Runner(fake, taplan.Robot.teleavatar(), config=config, clock=fake.now)
+    for _ in range(200):  # 100 Hz states
+        fake.advance(0.01)
+        for side in api.SIDES:
+            fake.deliver(api.Topics.joint_states(side), {"name": [], "position": [0.0] * 7})
+    assert runner.stale_after() == pytest.approx(0.7, abs=1e-9)  # [s]
+
+
+def test_runner_config_refuses_meaningless_stall_periods() -> None:
+    for bad in (0.0, -5.0, float("nan"), True, "5"):
+        with pytest.raises(InvalidInputError, match="stale_periods"):
+            RunnerConfig(stale_periods=bad)

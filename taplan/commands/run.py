@@ -22,9 +22,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from taplan.commands._ros_args import add_transport_arguments, open_transport
+
+if TYPE_CHECKING:
+    from taplan.ros.runner import RunnerConfig
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,10 +63,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", default=None, help="also check clearance to this scene's obstacles (.yaml/.json)")
 
 
+def runner_config(args: argparse.Namespace) -> RunnerConfig:
+    """The runner's configuration from the options; ``--state-timeout`` is the stall time itself, not a ceiling
+    over 5 of the robot's measured publishing periods."""
+    from taplan.ros.runner import RunnerConfig
+
+    return RunnerConfig(
+        rate=args.rate,
+        state_timeout=args.state_timeout,
+        stale_periods=float("inf"),
+        tracking_error=args.tracking_error,
+        wait_timeout=args.wait,
+        disable=args.disable,
+        require_fsm=not args.no_fsm,
+        command_velocity=args.command_velocity,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     from taplan.errors import InvalidInputError
     from taplan.robot import Robot
-    from taplan.ros.runner import CheckFailedError, Runner, RunnerConfig
+    from taplan.ros.runner import CheckFailedError, Runner
     from taplan.trajectory import Trajectory
 
     for option, value in (
@@ -89,15 +109,7 @@ def run(args: argparse.Namespace) -> int:
     if args.targets is not None and args.duration is None:
         raise InvalidInputError("--duration", None, "a streaming time [s] with --targets")
     trajectory = Trajectory.load(args.file, Robot.teleavatar().joint_names) if args.file is not None else None
-    config = RunnerConfig(
-        rate=args.rate,
-        state_timeout=args.state_timeout,
-        tracking_error=args.tracking_error,
-        wait_timeout=args.wait,
-        disable=args.disable,
-        require_fsm=not args.no_fsm,
-        command_velocity=args.command_velocity,
-    )
+    config = runner_config(args)
     robot = Robot.teleavatar()
     world = None
     if args.scene is not None:

@@ -116,7 +116,7 @@ class RunnerConfig:
         state_timeout: Stop when no joint state arrived for this long [s] (the ceiling; see ``stale_periods``).
         stale_periods: Stop when the joint states are older than this many of the robot's measured publishing
             periods (at least ``MIN_STALE``, 200 ms): a stall is named by its age, before the tracking
-            error it causes.
+            error it causes. ``inf`` leaves ``state_timeout`` alone to decide (``taplan run --state-timeout``).
         tracking_error: Abort when |measured - commanded| exceeds this [rad] on any joint.
         start_tolerance: A plan must start within this of the measured position [rad].
         wait_timeout: How long to wait for the first joint states [s].
@@ -168,6 +168,9 @@ class RunnerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < float("inf")):
                 raise InvalidInputError(name, value, "a positive, finite number")
+        periods = self.stale_periods
+        if isinstance(periods, bool) or not isinstance(periods, (int, float)) or not periods > 0:
+            raise InvalidInputError("stale_periods", periods, "a positive number of periods (inf: state_timeout only)")
         if not (isinstance(self.settle_time, (int, float)) and 0 <= self.settle_time < float("inf")):
             raise InvalidInputError("settle_time", self.settle_time, "a time >= 0 [s]")
 
