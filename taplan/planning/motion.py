@@ -50,7 +50,7 @@ import numpy as np
 import numpy.typing as npt
 
 from taplan._threads import run_single_threaded
-from taplan.errors import InvalidInputError, PlanningError, TaplanError, TimingError
+from taplan.errors import CollisionError, InvalidInputError, PlanningError, TaplanError, TimingError
 from taplan.limits import JointLimits
 from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
@@ -701,6 +701,14 @@ def _check_budget(max_time: Any) -> float:
 
 
 @run_single_threaded  # small arrays: BLAS/OpenMP worker threads cost more than they save (taplan._threads)
+def _end_clearance(world: CollisionWorld, q: np.ndarray, argument: str, floor: float) -> tuple[float, tuple[str, str]]:
+    """The smallest distance [m] of an end and its pair (one query serves the floor check and the approach)."""
+    d, pair = world.min_distance(q)
+    if d < floor:
+        raise CollisionError(argument, pair, -d, floor)
+    return d, pair
+
+
 def plan_motion(
     robot: Robot,
     start: npt.ArrayLike,
@@ -763,7 +771,7 @@ def plan_motion(
     q0 = robot.check_configuration(start, "start")
     if not limits.within(q0):
         raise InvalidInputError("start", np.round(q0, 4).tolist(), "a configuration within the limits")
-    world.check_configuration(q0, "start", margin=floor)
+    clearance = {"start": _end_clearance(world, q0, "start", floor)}
     rng = np.random.default_rng(seed)
     times["validate"] = time.perf_counter() - begin
 
@@ -775,7 +783,7 @@ def plan_motion(
         q1 = robot.check_configuration(goal, "goal")
         if not limits.within(q1):
             raise InvalidInputError("goal", np.round(q1, 4).tolist(), "a configuration within the limits")
-        world.check_configuration(q1, "goal", margin=floor)
+        clearance["goal"] = _end_clearance(world, q1, "goal", floor)
     times["goal_ik"] = time.perf_counter() - clock
 
     active = np.flatnonzero(np.abs(q1 - q0) > 1e-12)
@@ -784,7 +792,7 @@ def plan_motion(
     clock = time.perf_counter()
     approaches: list[Approach] = []
     for end, q_end in (("start", q0), ("goal", q1)):
-        d, pair = world.min_distance(q_end)
+        d, pair = clearance[end] if end in clearance else world.min_distance(q_end)
         if d >= margin:
             continue
         approach = approach_segment(world, q_end, end, active, limits.lower, limits.upper, margin, floor)
