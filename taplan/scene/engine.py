@@ -417,26 +417,21 @@ class DistanceEngine:
         the witness parameter on the segment."""
         import coal
 
+        from taplan.scene.coal_query import signed_distance
+
         world = self.world
         start, end = ends
         frame = _segment_pose(start, end)
         geometry = world._body_geometry[body][0]
         obstacle = self.obstacles[item]
-        result = coal.DistanceResult()
-        d = float(
-            coal.distance(
-                self.coal_geometry[item],
-                coal.Transform3s(obstacle.pose[:3, :3], obstacle.pose[:3, 3]),
-                geometry,
-                coal.Transform3s(frame[:3, :3], frame[:3, 3]),
-                self._request,
-                result,
-            )
+        d, pb, pa, n = signed_distance(
+            coal,
+            self.coal_geometry[item],
+            coal.Transform3s(obstacle.pose[:3, :3], obstacle.pose[:3, 3]),
+            geometry,
+            coal.Transform3s(frame[:3, :3], frame[:3, 3]),
+            self._request,
         )
-        pb, pa = np.array(result.getNearestPoint1()), np.array(result.getNearestPoint2())
-        n = np.array(result.normal, dtype=float)
-        norm = float(np.linalg.norm(n))
-        n = n / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
         axis = end - start
         s = float(np.clip((pa + world.bodies[body].radius * n - start) @ axis / max(axis @ axis, _TINY), 0.0, 1.0))
         return d, pa, pb, n, s

@@ -1001,13 +1001,9 @@ class CollisionWorld:
         self, g1: Any, t1: Any, g2: Any, t2: Any, request: Any = None
     ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """coal distance between object 1 (b) and object 2 (a): (d, p_a, p_b, n from b to a)."""
-        result = self._coal.DistanceResult()
-        d = float(self._coal.distance(g1, t1, g2, t2, self._request if request is None else request, result))
-        pb = np.array(result.getNearestPoint1())
-        pa = np.array(result.getNearestPoint2())
-        n = np.array(result.normal, dtype=float)
-        norm = float(np.linalg.norm(n))
-        n = n / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
+        from taplan.scene.coal_query import signed_distance
+
+        d, pb, pa, n = signed_distance(self._coal, g1, t1, g2, t2, self._request if request is None else request)
         return d, pa, pb, n
 
     def min_distance(self, q: npt.ArrayLike) -> tuple[float, tuple[str, str]]:
