@@ -700,7 +700,6 @@ def _check_budget(max_time: Any) -> float:
     return float(max_time)
 
 
-@run_single_threaded  # small arrays: BLAS/OpenMP worker threads cost more than they save (taplan._threads)
 def _end_clearance(world: CollisionWorld, q: np.ndarray, argument: str, floor: float) -> tuple[float, tuple[str, str]]:
     """The smallest distance [m] of an end and its pair (one query serves the floor check and the approach)."""
     d, pair = world.min_distance(q)
@@ -709,6 +708,7 @@ def _end_clearance(world: CollisionWorld, q: np.ndarray, argument: str, floor: f
     return d, pair
 
 
+@run_single_threaded  # small arrays: BLAS/OpenMP worker threads cost more than they save (taplan._threads)
 def plan_motion(
     robot: Robot,
     start: npt.ArrayLike,
