@@ -304,7 +304,7 @@ def test_run_exits_within_a_second_of_the_robot_side_crashing(robot, start_sim, 
     # named by the states' age (>= MIN_STALE, 200 ms), not by the tracking error the stall causes later
     assert "taplan run: stopped: no joint states for " in out, out
     age = float(out.split("no joint states for ")[1].split()[0])
-    assert age < 0.35, out  # [s] MIN_STALE (200 ms) plus this loaded machine's scheduling
+    assert 0.2 <= age < 0.6, out  # [s] MIN_STALE (200 ms) plus the scheduling of a CI machine running the suite
     # [s] no writer lingers for acknowledgements from the dead reader, no slow interpreter teardown: 0.8 s expected
     # alone (stall 0.2 s + brake 0.3 s + close 0.3 s); the margin is for the full suite's load on 2 cores
     assert exited < 1.5, exited
