@@ -205,51 +205,71 @@ def test_jacobian_batch_with_attached_objects_equals_the_single_queries(robot: t
     np.testing.assert_allclose(gaps[clear], matrix.distance[clear], rtol=0, atol=1e-9)  # witnesses d apart [m]
 
 
-def _attached_pairs_one_by_one(world: CollisionWorld, q: np.ndarray, bound_beyond: float) -> dict:
-    """The attached object's pairs queried one at a time (coal for every pair within ``bound_beyond`` of its
-    bounding sphere, else the spheres' gap), at ``q``: {pair: distance}."""
+def _attached_pairs_one_by_one(world: CollisionWorld, q: np.ndarray) -> dict:
+    """The attached object's pairs queried one at a time by coal (GJK/EPA tolerances 1e-12) at ``q``:
+    {pair: distance}."""
+    import coal
     import pinocchio as pin
 
+    request = coal.DistanceRequest()
+    request.enable_signed_distance = True
+    request.gjk_tolerance = request.epa_tolerance = 1e-12
     pin.forwardKinematics(world.model, world.data, q)
     pin.updateFramePlacements(world.model, world.data)
     [att] = world._attached_items()
     T = world.data.oMf[att.frame].homogeneous @ att.pose
-    transform, center = world._coal.Transform3s(T[:3, :3], T[:3, 3]), T[:3, 3]
+    transform = coal.Transform3s(T[:3, :3], T[:3, 3])
     out = {}
     for item in world._items:
-        gap = np.inf if item.halfspace else np.linalg.norm(center - item.center) - item.radius - att.radius
-        exact = gap <= bound_beyond or item.halfspace
-        if exact:
-            gap = world._pair(item.geometry, item.transform, att.geometry, transform)[0]
-        out[(att.name, item.name)] = gap
+        out[(att.name, item.name)] = world._pair(item.geometry, item.transform, att.geometry, transform, request)[0]
     for k, body in enumerate(world.bodies):
-        if body.name in att.touch:
-            continue
-        a = world.data.oMi[body.joint].rotation @ body.start + world.data.oMi[body.joint].translation
-        b = world.data.oMi[body.joint].rotation @ body.end + world.data.oMi[body.joint].translation
-        gap = np.linalg.norm(center - (a + b) / 2) - body.radius - np.linalg.norm(b - a) / 2 - att.radius
-        if gap <= bound_beyond:
-            gap = world._pair(world._body_geometry[k][0], world._body_transform(k), att.geometry, transform)[0]
-        out[(att.name, body.name)] = gap
+        if body.name not in att.touch:
+            geometry, placement = world._body_geometry[k][0], world._body_transform(k)
+            out[(att.name, body.name)] = world._pair(geometry, placement, att.geometry, transform, request)[0]
     return out
 
 
+ATTACHED_SHAPES = {
+    "box": Box((0.05, 0.04, 0.12)),
+    "cylinder": Cylinder(0.03, 0.14),
+    "capsule": Capsule(0.03, 0.1),
+    "sphere": Sphere(0.05),
+}
+
+
+@pytest.mark.parametrize("shape", sorted(ATTACHED_SHAPES))
 @pytest.mark.parametrize("bound_beyond", [np.inf, 0.05])
-def test_attached_pairs_equal_one_by_one_queries(robot: taplan.Robot, bound_beyond: float) -> None:
+def test_attached_pairs_equal_one_by_one_queries(robot: taplan.Robot, bound_beyond: float, shape: str) -> None:
+    """An attached object's pairs in the batch: against half-spaces in closed form (equal to coal to 1e-9 m at every
+    configuration), against the robot's capsules and solid obstacles bounded by its containing capsule: lower
+    bounds, equal to coal where within ``bound_beyond`` (spheres and capsules: everywhere); witness points the
+    distance apart along the normal."""
     scene = _scene(1)
-    scene.attach("tool", Box((0.05, 0.04, 0.12)), "right_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
+    scene.attach("tool", ATTACHED_SHAPES[shape], "right_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
     world = CollisionWorld(robot, scene)
-    Q = _configurations(robot, 4, 11)
+    world._request.gjk_tolerance = world._request.epa_tolerance = 1e-12  # the pairs left to coal, as the reference
+    Q = _configurations(robot, 16, 11)
     matrix = world.distance_matrix(Q, bound_beyond=bound_beyond)
     column = {pair: k for k, pair in enumerate(matrix.pairs)}
-    bounded = 0
+    halfspaces = {name for name, o in scene.obstacles.items() if isinstance(o.shape, HalfSpace)}
+    bounded = penetrating = 0
     for n, q in enumerate(Q):
-        reference = _attached_pairs_one_by_one(world, q, bound_beyond)
+        reference = _attached_pairs_one_by_one(world, q)
         assert set(reference) == {pair for pair in matrix.pairs if pair[0] == "tool"}
         for pair, d in reference.items():
-            assert matrix.distance[n, column[pair]] == pytest.approx(d, abs=1e-12)  # [m]
-        bounded += sum(np.isfinite(bound_beyond) and d > bound_beyond for d in reference.values())
-    assert bounded > 0 or not np.isfinite(bound_beyond)  # the sphere bounds were used
+            got = matrix.distance[n, column[pair]]
+            assert got <= d + DIST_TOL  # [m] a lower bound always
+            if got <= bound_beyond or pair[1] in halfspaces or shape in ("capsule", "sphere"):
+                assert got == pytest.approx(d, abs=DIST_TOL)  # [m] exact
+            else:
+                bounded += 1
+            penetrating += d < 0.0
+            k = column[pair]
+            if got > 1e-6 and got == pytest.approx(d, abs=DIST_TOL):  # a clear exact pair: its witnesses
+                gap = matrix.point_a[n, k] - matrix.point_b[n, k]
+                np.testing.assert_allclose(gap, got * matrix.normal[n, k], rtol=0, atol=1e-9)  # [m]
+    assert penetrating > 0  # the penetration depths were compared too
+    assert bounded > 0 or not np.isfinite(bound_beyond) or shape in ("capsule", "sphere")  # the bounds were used
 
 
 def test_segment_box_and_cylinder_against_dense_sampling() -> None:
@@ -302,14 +322,24 @@ def test_single_queries_equal_the_coal_reference(robot: taplan.Robot, seed: int,
             got = world.distances(q, cutoff=cutoff, bound_beyond=bound)
             ref = reference.distances(q, cutoff=cutoff, bound_beyond=bound)
             assert got.pairs == ref.pairs
-            np.testing.assert_allclose(got.distance, ref.distance, rtol=0, atol=DIST_TOL)
             np.testing.assert_allclose(got.travel, ref.travel, rtol=0, atol=1e-12)
-            if bound < np.inf:
-                continue  # bounds: their witnesses are nominal
+            if bound < np.inf:  # bounds: their witnesses are nominal
+                # the attached object's pairs: lower bounds (closed forms or bounding capsules, tighter than the
+                # reference's spheres), exact where within the bound; the others as the reference reports them
+                tool = np.array([pair[0] == "tool" for pair in ref.pairs], dtype=bool)
+                np.testing.assert_allclose(got.distance[~tool], ref.distance[~tool], rtol=0, atol=DIST_TOL)
+                full = reference.distances(q, jacobian=False)
+                every = dict(zip(full.pairs, full.distance, strict=True))
+                exact = np.array([every[pair] for pair in ref.pairs])[tool]
+                assert np.all(got.distance[tool] <= exact + DIST_TOL)
+                within = got.distance[tool] <= bound
+                np.testing.assert_allclose(got.distance[tool][within], exact[within], rtol=0, atol=DIST_TOL)
+                continue
+            np.testing.assert_allclose(got.distance, ref.distance, rtol=0, atol=DIST_TOL)
             clear = ref.distance > 1e-6  # penetrating pairs: coal's EPA witnesses are not unique
             penetrating += int(np.sum(~clear))
             for k in np.flatnonzero(clear):
-                tolerance = CYLINDER_JAC_TOL if ref.pairs[k][1] in cylinders else JAC_TOL
+                tolerance = CYLINDER_JAC_TOL if set(ref.pairs[k]) & cylinders else JAC_TOL  # the tool is one too
                 np.testing.assert_allclose(got.jacobian[k], ref.jacobian[k], rtol=0, atol=tolerance)
                 np.testing.assert_allclose(got.normal[k], ref.normal[k], rtol=0, atol=1e-4)
                 compared += 1
@@ -399,20 +429,26 @@ def test_distances_of_a_subset_equal_the_full_batch(robot: taplan.Robot, seed: i
     np.testing.assert_allclose(every.distance[:, solid], full.distance[:, solid], rtol=0, atol=1e-12)
 
 
-def test_pair_distances_leave_attached_pairs_to_the_full_batch(robot: taplan.Robot) -> None:
+@pytest.mark.parametrize("bound_beyond", [np.inf, 0.05])
+def test_pair_distances_with_attached_objects_equal_the_full_batch(robot: taplan.Robot, bound_beyond: float) -> None:
+    """With an attached object, pair_distances answers any subset of the pairs, in the asked order, with the full
+    batch's distances (bounds included) and travel rows; every pair when none are named."""
     scene = _scene(0)
     scene.attach("tool", Cylinder(0.03, 0.12), "left_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
     world = CollisionWorld(robot, scene)
-    Q = _configurations(robot, 4, 3)
-    matrix = world.distance_matrix(Q)
-    robot_pair = matrix.pairs[0]
-    tool_pair = next(pair for pair in matrix.pairs if pair[0] == "tool")
-    got = world.pair_distances(Q, (robot_pair,))
-    assert got is not None
-    np.testing.assert_allclose(got.distance[:, 0], matrix.distance[:, 0], rtol=0, atol=1e-12)
-    assert world.pair_distances(Q, (robot_pair, tool_pair)) is None
-    assert world.pair_distances(Q) is None  # every pair includes the attached object's
-    assert CollisionWorld(robot, scene, engine=False).pair_distances(Q, (robot_pair,)) is None
+    Q = _configurations(robot, 6, 3)
+    matrix = world.distance_matrix(Q, bound_beyond=bound_beyond)
+    column = {pair: k for k, pair in enumerate(matrix.pairs)}
+    tools = [pair for pair in matrix.pairs if pair[0] == "tool"]
+    for asked in ((matrix.pairs[0],), (tools[3], matrix.pairs[5], tools[0]), tuple(tools), None):
+        got = world.pair_distances(Q, asked, bound_beyond=bound_beyond)
+        assert got is not None
+        assert set(got.pairs) == set(matrix.pairs) if asked is None else got.pairs == asked
+        k = [column[pair] for pair in got.pairs]
+        np.testing.assert_allclose(got.distance, matrix.distance[:, k], rtol=0, atol=1e-12)  # [m]
+        np.testing.assert_array_equal(got.travel, matrix.travel[k])
+    assert world.pair_distances(Q, (("tool", "no such body"),)) is None
+    assert CollisionWorld(robot, scene, engine=False).pair_distances(Q, (matrix.pairs[0],)) is None
 
 
 def test_worlds_with_the_same_bodies_share_one_kernel_and_other_bodies_get_their_own(robot: taplan.Robot) -> None:

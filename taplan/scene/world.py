@@ -26,7 +26,7 @@ from taplan.errors import CollisionError, InvalidInputError
 from taplan.scene.engine import KERNEL_LOCK, segment_parameters, shape_code, shape_size, solid_pairs
 from taplan.scene.robot_bodies import Body, allowed_pairs, robot_bodies
 from taplan.scene.scene import Scene
-from taplan.scene.shapes import Box, HalfSpace
+from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Sphere
 
 if TYPE_CHECKING:
     from taplan.robot import Robot
@@ -100,35 +100,6 @@ class _Pairs:
     s_b: np.ndarray | None = None
 
 
-class _PairList:
-    """Pairs found one at a time (coal queries of attached objects)."""
-
-    def __init__(self, nv: int) -> None:
-        self.nv = nv
-        self.rows: list[tuple] = []
-
-    def add(self, name: tuple[str, str], d: float, pa: Any, pb: Any, n: Any, a: int, b: int, travel: Any) -> None:
-        self.rows.append((name, d, pa, pb, n, a, b, travel))
-
-    def add_rows(self, names: list[tuple[str, str]], *columns: np.ndarray) -> None:
-        """Several pairs at once: ``names`` and the columns of :meth:`add` as arrays (one row per pair)."""
-        self.rows.extend(zip(names, *columns, strict=True))
-
-    def freeze(self) -> _Pairs:
-        count = len(self.rows)
-        column: list[Any] = list(zip(*self.rows, strict=True)) if count else [[] for _ in range(8)]
-        return _Pairs(
-            list(column[0]),
-            np.array(column[1], dtype=float),
-            np.array(column[2], dtype=float).reshape(count, 3),
-            np.array(column[3], dtype=float).reshape(count, 3),
-            np.array(column[4], dtype=float).reshape(count, 3),
-            np.array(column[5], dtype=int),
-            np.array(column[6], dtype=int),
-            np.array(column[7], dtype=float).reshape(count, self.nv),
-        )
-
-
 class _Item:
     """An obstacle or attached object with its coal geometry and bounding sphere."""
 
@@ -145,6 +116,11 @@ class _Item:
         self.transform = coal.Transform3s(pose[:3, :3], pose[:3, 3])
         self.center = pose[:3, 3]  # where it is now [m], root frame (attached: updated per configuration)
         self.reach = np.zeros(0)  # attached objects: per joint, how far it can be from the joint [m]
+        # the engine's closed form of the shape (-1: none, a mesh), its sizes and its containing capsule
+        self.kind = shape_code(shape)
+        self.size = np.array(shape_size(shape), dtype=float)
+        self.core = float(getattr(shape, "radius", 0.0))
+        self.capsule = _containing_capsule(shape)
 
 
 class CollisionWorld:
@@ -372,7 +348,7 @@ class CollisionWorld:
             parts.append(self._obstacle_distances(starts, ends, cutoff, bound_beyond))
         parts += self._field_distances(starts, ends, cutoff, bound_beyond)
         if attached:
-            parts.append(self._attached_distances(starts, ends, cutoff, bound_beyond))
+            parts.append(self._attached_distances(q, starts, ends, cutoff, bound_beyond))
         J = (
             np.asarray(data.J).reshape(6, model.nv) if jacobian and (kernel is None or attached) else None
         )  # nv = 1: 1-D
@@ -466,9 +442,9 @@ class CollisionWorld:
         """The distances of the named ``pairs`` (as :meth:`distance_matrix` names them; None: every pair) at N
         configurations (N, nq), as :meth:`distance_matrix` reports them (to rounding), without the witness points
         and normals and without evaluating the other pairs: 15-50 % cheaper than :meth:`distance_matrix` for every
-        pair, and a certificate's later levels need only the few pairs not yet certified. None where only
-        :meth:`distance_matrix` answers: no engine, non-finite configurations, a pair of an attached object (or
-        every pair, with attached objects)."""
+        pair, and a certificate's later levels need only the few pairs not yet certified. Attached objects' pairs
+        come from :meth:`_attached_many` (only when one is asked for). None where only :meth:`distance_matrix`
+        answers: no engine, non-finite configurations, a pair that is not the world's."""
         Q = np.asarray(configurations, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != self.model.nq:
             raise InvalidInputError("configurations", f"shape {Q.shape}", f"(N, {self.model.nq})")
@@ -476,9 +452,9 @@ class CollisionWorld:
         if engine is None or not np.all(np.isfinite(Q)):
             return None
         names, travel, _, _ = engine.pair_columns()
+        if self._attached_items():
+            return self._pair_distances_attached(Q, pairs, bound_beyond)
         if pairs is None:
-            if self._attached_items():
-                return None
             every = engine.distances_of(Q, np.arange(len(names)), bound_beyond=bound_beyond)
             return PairDistances(names, every, travel)
         columns = engine.columns_of(tuple(pairs))
@@ -486,6 +462,41 @@ class CollisionWorld:
             return None
         distance = engine.distances_of(Q, columns, bound_beyond=bound_beyond)
         return PairDistances(tuple(pairs), distance, travel[columns])
+
+    def _pair_distances_attached(
+        self, Q: np.ndarray, pairs: tuple[tuple[str, str], ...] | None, bound_beyond: float
+    ) -> PairDistances | None:
+        """:meth:`pair_distances` with attached objects: the engine's pairs from the engine, the objects' from
+        :meth:`_attached_many` (all of theirs at once, as :meth:`distance_matrix` has them; only when one is
+        asked for), in the asked order (None: the engine's pairs, then the objects')."""
+        engine = self.engine()
+        names, travel, _, _ = engine.pair_columns()
+        if pairs is None:
+            E, _ = engine.segments(Q, jacobian=False)
+            found = self._attached_many(Q, E, bound_beyond, False)
+            every = engine.distances_of(Q, np.arange(len(names)), bound_beyond=bound_beyond)
+            return PairDistances(names + tuple(found[0]), np.hstack([every, found[1]]), np.vstack([travel, found[7]]))
+        owners = {att.name for att in self._attached_items()}
+        wanted = tuple(pairs)
+        own = np.array([pair[0] not in owners for pair in wanted], dtype=bool)
+        columns = engine.columns_of(tuple(pair for pair, mine in zip(wanted, own, strict=True) if mine))
+        if columns is None:
+            return None
+        distance = np.empty((len(Q), len(wanted)))
+        rows = np.empty((len(wanted), self.model.nv))
+        distance[:, own] = engine.distances_of(Q, columns, bound_beyond=bound_beyond)
+        rows[own] = travel[columns]
+        if not own.all():
+            E, _ = engine.segments(Q, jacobian=False)
+            found = self._attached_many(Q, E, bound_beyond, False)
+            index = {pair: k for k, pair in enumerate(found[0])}
+            objects = np.flatnonzero(~own)
+            column = [index.get(wanted[k], -1) for k in objects.tolist()]
+            if -1 in column:
+                return None
+            distance[:, objects] = found[1][:, column]
+            rows[objects] = found[7][column]
+        return PairDistances(wanted, distance, rows)
 
     def distance_matrix(self, configurations: npt.ArrayLike, *, bound_beyond: float = math.inf) -> Any:
         """Every pair (no cutoff) at N configurations (N, nq) as one :class:`~taplan.scene.engine.BatchDistances`
@@ -808,18 +819,20 @@ class CollisionWorld:
 
     def _attached_many(self, Q: np.ndarray, E: np.ndarray, bound_beyond: float, jacobians: bool) -> tuple:
         """:meth:`_attached_distances` without a cutoff at N configurations ``Q`` (N, nq) whose body end points
-        are ``E`` (N, B, 2, 3): the bounds of all configurations' pairs at once, coal only for the pairs within
-        ``bound_beyond`` of their bounding spheres (and half-spaces). Returns the pairs' names, distances (N, A),
+        are ``E`` (N, B, 2, 3), for all configurations at once. With the engine (``use_engine``) an object with a
+        closed form (box, sphere, capsule, cylinder) gets its robot body pairs in closed form (the body's capsule
+        against the object, in the object's frame: :func:`~taplan.scene.engine.solid_pairs`) and half-spaces by
+        its support point; against solid obstacles its containing capsule bounds it (exact for spheres and
+        capsules). coal runs only for the pairs those bounds keep within ``bound_beyond`` (and meshes,
+        penetrations of a body's axis); the others report their bound. Returns the pairs' names, distances (N, A),
         witness points and normals (N, A, 3), owners (A,), travel rows (A, nv) and, with ``jacobians``, the WORLD
         joint Jacobians (N, 6, nv) of the configurations."""
         model, data = self.model, self.data
         N, nv = len(Q), model.nv
         attached = self._attached_items()
-        joints = self._body_joint.tolist()
         frames = np.empty((N, len(attached), 4, 4))
-        rotation, origin = np.empty((N, len(joints), 3, 3)), np.empty((N, len(joints), 3))
         J = np.empty((N, 6, nv)) if jacobians else None
-        for n, q in enumerate(Q):  # the frames of the objects and the bodies' joints (coal needs whole placements)
+        for n, q in enumerate(Q):  # the objects' frames (the bodies' come from their end points)
             if J is not None:
                 pin.computeJointJacobians(model, data, q)
                 J[n] = np.asarray(data.J).reshape(6, nv)
@@ -828,62 +841,25 @@ class CollisionWorld:
             pin.updateFramePlacements(model, data)
             for a, att in enumerate(attached):
                 frames[n, a] = data.oMf[att.frame].homogeneous @ att.pose
-            for b, j in enumerate(joints):
-                rotation[n, b], origin[n, b] = data.oMi[j].rotation, data.oMi[j].translation
-        starts, ends = E[:, :, 0], E[:, :, 1]
-        centers = (starts + ends) / 2  # the bodies' bounding spheres (N, B, 3)
-        radii = self._radius[None] + np.linalg.norm(ends - starts, axis=-1) / 2
         names: list[tuple[str, str]] = []
         columns: list[tuple[np.ndarray, ...]] = []  # per group of pairs: d (N, k), pa, pb, n (N, k, 3)
         owner_a: list[np.ndarray] = []
         owner_b: list[np.ndarray] = []
         travel: list[np.ndarray] = []
-        transforms: dict[tuple[int, int], Any] = {}
-
-        def placed(a: int, n: int) -> Any:
-            if (a, -1 - n) not in transforms:
-                T = frames[n, a]
-                transforms[(a, -1 - n)] = self._coal.Transform3s(T[:3, :3], T[:3, 3])
-            return transforms[(a, -1 - n)]
-
         for a, att in enumerate(attached):
             parent = model.frames[att.frame].parentJoint
-            center = frames[:, a, :3, 3]  # (N, 3)
-            others = [(item, item.center, item.radius, None) for item in self._items]
-            listed = [k for k, body in enumerate(self.bodies) if body.name not in att.touch]
-            for k in listed:
-                others.append((None, centers[:, k], radii[:, k], k))
-            d = np.empty((N, len(others)))
-            pa, pb, normal = np.empty((N, len(others), 3)), np.empty((N, len(others), 3)), np.empty((N, len(others), 3))
-            for col, (item, other_center, other_radius, k) in enumerate(others):
-                away = center - other_center
-                apart = np.linalg.norm(away, axis=-1)
-                unit = away / np.maximum(apart, 1e-12)[:, None]
-                gap = apart - other_radius - att.radius
-                if item is not None and item.halfspace:
-                    gap = np.full(N, -np.inf)  # no bound for a half-space: always the exact query
-                d[:, col], normal[:, col] = gap, unit
-                pa[:, col] = center - att.radius * unit
-                pb[:, col] = other_center + np.asarray(other_radius)[..., None] * unit
-                for n in np.flatnonzero(gap <= bound_beyond).tolist():
-                    if item is not None:
-                        geometry, transform = item.geometry, item.transform
-                    else:
-                        geometry = self._body_geometry[k][0]
-                        transform = self._coal_placement(rotation[n, k], origin[n, k], k)
-                    d[n, col], pa[n, col], pb[n, col], normal[n, col] = self._pair(
-                        geometry, transform, att.geometry, placed(a, n)
-                    )
-                if item is not None:
-                    names.append((att.name, item.name))
-                    owner_b.append(np.zeros(1, dtype=int))
-                    travel.append(att.reach[None])
-                else:
-                    names.append((att.name, self.bodies[k].name))
-                    owner_b.append(self._body_joint[k : k + 1])
-                    travel.append((att.reach + self._body_reach[k])[None])
-                owner_a.append(np.array([parent]))
-            columns.append((d, pa, pb, normal))
+            columns.append(self._attached_items_columns(att, frames[:, a], bound_beyond))
+            for item in self._items:
+                names.append((att.name, item.name))
+                owner_b.append(np.zeros(1, dtype=int))
+                travel.append(att.reach[None])
+            listed = np.array([k for k, body in enumerate(self.bodies) if body.name not in att.touch], dtype=int)
+            columns.append(self._attached_bodies_columns(att, frames[:, a], E[:, listed], listed, bound_beyond))
+            names += [(att.name, self.bodies[k].name) for k in listed.tolist()]
+            owner_b.append(self._body_joint[listed])
+            travel.append(att.reach[None] + self._body_reach[listed])
+            owner_a.append(np.full(len(self._items) + len(listed), parent))
+            center = frames[:, a, :3, 3]
             for o in self._fields:  # against the object's bounding sphere: a lower bound of its distance
                 R, t = o.pose[:3, :3], o.pose[:3, 3]
                 local = (center - t) @ R
@@ -906,77 +882,140 @@ class CollisionWorld:
             J,
         )
 
-    def _attached_distances(
-        self, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float = math.inf
-    ) -> _Pairs:
-        """Attached objects vs obstacles and vs the robot bodies they may not touch (coal); pairs whose bounding
-        spheres are more than ``bound_beyond`` apart report that gap (a lower bound) without a coal query."""
-        data = self.data
-        for att in self._attached_items():
-            T = data.oMf[att.frame].homogeneous @ att.pose
-            att.transform = self._coal.Transform3s(T[:3, :3], T[:3, 3])
-            att.center = T[:3, 3]
-        # the bodies' bounding spheres at once; a body's coal transform only for an exact query (per configuration,
-        # the 27 transforms and the scalar norms of the bounds were most of an attached scene's distance query)
-        centers = (starts + ends) / 2
-        radii = self._radius + np.linalg.norm(ends - starts, axis=1) / 2
-        transforms: dict[int, Any] = {}
-        out = _PairList(self.model.nv)
-        for att in self._attached_items():
-            parent = self.model.frames[att.frame].parentJoint
-            away = att.center - centers  # from each body's centre toward the object's [m]
-            apart = np.linalg.norm(away, axis=1)
-            unit = away / np.maximum(apart, 1e-12)[:, None]
-            body_gaps = apart - radii - att.radius
-            for item in self._items:
-                between = math.inf if item.halfspace else float(np.linalg.norm(att.center - item.center))
-                gap = between - item.radius - att.radius
-                if gap > cutoff:
-                    continue
-                if bound_beyond < gap < math.inf:
-                    n = (att.center - item.center) / max(between, 1e-12)
-                    pa, pb, d = att.center - att.radius * n, item.center + item.radius * n, gap
-                else:
-                    d, pa, pb, n = self._pair(item.geometry, item.transform, att.geometry, att.transform)
-                if d <= cutoff:
-                    out.add((att.name, item.name), d, pa, pb, n, parent, 0, att.reach)
-            # the bodies: bounds for all at once, coal where the bound is not enough, in body order
-            listed = np.array([b.name not in att.touch for b in self.bodies]) & (body_gaps <= cutoff)
-            k_all = np.flatnonzero(listed)
-            d_all = body_gaps[k_all].copy()
-            n_all = unit[k_all].copy()
-            pa_all = att.center - att.radius * n_all
-            pb_all = centers[k_all] + radii[k_all, None] * n_all
-            for row, k in enumerate(k_all.tolist()):
-                if bound_beyond < d_all[row]:
-                    continue
-                if k not in transforms:
-                    transforms[k] = self._body_transform(k)
-                geometry = self._body_geometry[k][0]
-                d_all[row], pa_all[row], pb_all[row], n_all[row] = self._pair(
-                    geometry, transforms[k], att.geometry, att.transform
+    def _attached_bodies_columns(
+        self, att: _Item, frames: np.ndarray, E: np.ndarray, listed: np.ndarray, bound_beyond: float
+    ) -> tuple[np.ndarray, ...]:
+        """The object ``att`` (placed at ``frames`` (N, 4, 4)) against the robot bodies ``listed`` (L,) whose end
+        points are ``E`` (N, L, 2, 3): (d (N, L), p_a on the object, p_b on the body, normal from body to object).
+        First the object's containing capsule against the bodies' capsules, all pairs at once (exact for spheres
+        and capsules); where that lower bound is within ``bound_beyond``, the exact distance: in closed form where
+        the engine may and the object has one (the body's capsule against the object in its frame), else coal."""
+        N, L = E.shape[:2]
+        R, c = frames[:, :3, :3], frames[:, :3, 3]
+        radius = np.tile(self._radius[listed], N)
+        axis, rounding = att.capsule
+        tip = np.repeat(R @ axis, L, axis=0)  # (N L, 3): the object's core segment is c ± tip
+        a0, a1 = np.repeat(c, L, axis=0) - tip, np.repeat(c, L, axis=0) + tip
+        b0, b1 = E[:, :, 0].reshape(-1, 3), E[:, :, 1].reshape(-1, 3)
+        s, t = segment_parameters(a0, a1, b0, b1)
+        delta = a0 + s[:, None] * (a1 - a0) - (b0 + t[:, None] * (b1 - b0))
+        norm = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+        normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
+        d = norm - rounding - radius
+        pa = a0 + s[:, None] * (a1 - a0) - rounding * normal
+        pb = b0 + t[:, None] * (b1 - b0) + radius[:, None] * normal
+        exact: list[tuple[int, Any]] = []  # (row, coal request)
+        if att.kind not in _ROUNDED or not self.use_engine:
+            near = np.flatnonzero(d <= bound_beyond)
+            if self.use_engine and att.kind >= 0 and near.size:
+                # the bodies' segments in the object's frame, (x − c) R = Rᵀ (x − c); the object as the "obstacle"
+                Rn, cn = R[near // L], c[near // L]
+                e0 = np.einsum("mk,mkj->mj", b0[near] - cn, Rn)
+                e1 = np.einsum("mk,mkj->mj", b1[near] - cn, Rn)
+                m = near.size
+                _, d_k, pa_k, pb_k, n_k, inside = solid_pairs(
+                    np.full(m, att.kind), np.tile(att.size, (m, 1)), np.full(m, att.core), e0, e1, radius[near]
                 )
-            keep = d_all <= cutoff
-            k_all = k_all[keep]
-            out.add_rows(
-                [(att.name, self.bodies[k].name) for k in k_all.tolist()],
-                d_all[keep],
-                pa_all[keep],
-                pb_all[keep],
-                n_all[keep],
-                np.full(len(k_all), parent),
-                self._body_joint[k_all],
-                att.reach + self._body_reach[k_all],
+                d[near] = d_k
+                pa[near] = np.einsum("mkj,mj->mk", Rn, pb_k) + cn  # the object's witness, back to the root frame
+                pb[near] = np.einsum("mkj,mj->mk", Rn, pa_k) + cn  # the body's
+                normal[near] = -np.einsum("mkj,mj->mk", Rn, n_k)  # solid_pairs' normal: from the object to the body
+                exact = [(int(row), self._depth_request) for row in near[inside]]
+            else:
+                exact = [(int(row), self._request) for row in near]
+        elif self.use_engine:
+            # a sphere or capsule is its own containing capsule: exact, but for penetrations of the two axes
+            exact = [(int(row), self._depth_request) for row in np.flatnonzero(norm <= 1e-12)]
+        for row, request in exact:
+            n, col = divmod(row, L)
+            frame = _segment_frame(E[n, col, 0], E[n, col, 1])  # the capsule is symmetric about its axis
+            placement = self._coal.Transform3s(frame[:3, :3], frame[:3, 3])
+            d[row], pa[row], pb[row], normal[row] = self._pair(
+                self._body_geometry[int(listed[col])][0], placement, att.geometry, self._placed(frames[n]), request
             )
-            for o in self._fields:  # against the object's bounding sphere: a lower bound of its distance
-                R, t = o.pose[:3, :3], o.pose[:3, 3]
-                centre = ((att.center - t) @ R)[None]
-                d, pa, pb, n = o.shape.capsule_distances(centre, centre, np.array([att.radius]), cutoff)
-                if d[0] <= cutoff and np.isfinite(d[0]):
-                    out.add(
-                        (att.name, o.name), d[0], pa[0] @ R.T + t, pb[0] @ R.T + t, n[0] @ R.T, parent, 0, att.reach
-                    )
-        return out.freeze()
+        return d.reshape(N, L), pa.reshape(N, L, 3), pb.reshape(N, L, 3), normal.reshape(N, L, 3)
+
+    def _attached_items_columns(self, att: _Item, frames: np.ndarray, bound_beyond: float) -> tuple[np.ndarray, ...]:
+        """The object ``att`` (placed at ``frames`` (N, 4, 4)) against every obstacle item: (d (N, M), p_a on the
+        object, p_b on the item, normal from item to object). Half-spaces by the object's support point where it
+        has a closed form (exact); solids by the object's containing capsule in closed form (exact for spheres
+        and capsules) or its bounding sphere, and coal where that bound is within ``bound_beyond``."""
+        N, M = len(frames), len(self._items)
+        R, c = frames[:, :3, :3], frames[:, :3, 3]
+        d, pa, pb, normal = np.empty((N, M)), np.empty((N, M, 3)), np.empty((N, M, 3)), np.empty((N, M, 3))
+        closed = self.use_engine and att.kind >= 0
+        for m, item in enumerate(self._items):
+            request = self._request
+            if item.halfspace and closed:
+                up = item.pose[:3, 2]  # the half-space's outward normal
+                point = c + np.einsum("nkj,nj->nk", R, _support(att, -up @ R))  # the object's deepest point
+                d[:, m] = (point - item.center) @ up
+                pa[:, m], pb[:, m], normal[:, m] = point, point - d[:, m, None] * up, up
+                continue
+            if item.halfspace:
+                d[:, m] = -np.inf  # no bound for a half-space: always the exact query
+            elif closed and self._item_kind[m] >= 0:
+                # the object's containing capsule (its core segment along ``axis``, ``rounding``) as the "robot"
+                # capsule against the item, in the item's frame: exact when the object is that capsule
+                axis, rounding = att.capsule
+                Ri, ci = self._item_rotation[m], self._item_center[m]
+                tip = np.einsum("nkj,j->nk", R, axis)
+                e0, e1 = (c - tip - ci) @ Ri, (c + tip - ci) @ Ri
+                _, d_k, pa_k, pb_k, n_k, inside = solid_pairs(
+                    np.full(N, self._item_kind[m]),
+                    np.tile(self._item_size[m], (N, 1)),
+                    np.full(N, self._item_core[m]),
+                    e0,
+                    e1,
+                    np.full(N, rounding),
+                )
+                d[:, m] = np.where(inside, -np.inf, d_k)
+                pa[:, m], pb[:, m], normal[:, m] = pa_k @ Ri.T + ci, pb_k @ Ri.T + ci, n_k @ Ri.T
+                if att.kind in _ROUNDED:  # the object is its capsule: exact but for penetrations of its axis
+                    request = self._depth_request
+                    for n in np.flatnonzero(inside).tolist():
+                        d[n, m], pa[n, m], pb[n, m], normal[n, m] = self._pair(
+                            item.geometry, item.transform, att.geometry, self._placed(frames[n]), request
+                        )
+                    continue
+            else:
+                away = c - item.center
+                apart = np.linalg.norm(away, axis=-1)
+                unit = away / np.maximum(apart, 1e-12)[:, None]
+                d[:, m], normal[:, m] = apart - item.radius - att.radius, unit
+                pa[:, m], pb[:, m] = c - att.radius * unit, item.center + item.radius * unit
+            for n in np.flatnonzero(d[:, m] <= bound_beyond).tolist():
+                d[n, m], pa[n, m], pb[n, m], normal[n, m] = self._pair(
+                    item.geometry, item.transform, att.geometry, self._placed(frames[n]), request
+                )
+        return d, pa, pb, normal
+
+    def _placed(self, frame: np.ndarray) -> Any:
+        return self._coal.Transform3s(frame[:3, :3], frame[:3, 3])
+
+    def _attached_distances(
+        self, q: np.ndarray, starts: np.ndarray, ends: np.ndarray, cutoff: float, bound_beyond: float = math.inf
+    ) -> _Pairs:
+        """Attached objects vs obstacles and vs the robot bodies they may not touch at ``q`` (bodies' end points
+        ``starts``, ``ends`` (B, 3)): :meth:`_attached_many` for one configuration, the pairs within ``cutoff``;
+        pairs whose bound is beyond ``bound_beyond`` report it. (It runs the forward kinematics of ``q`` into
+        ``self.data`` again: the same placements, and the joint Jacobians there stay.)"""
+        nv = self.model.nv
+        E = np.stack([starts, ends], axis=1)[None]
+        names, d, pa, pb, normal, owner_a, owner_b, travel, _ = self._attached_many(
+            q[None], E, min(bound_beyond, cutoff), False
+        )
+        keep = np.flatnonzero(d[0] <= cutoff)
+        return _Pairs(
+            [names[k] for k in keep.tolist()],
+            d[0, keep],
+            pa[0, keep],
+            pb[0, keep],
+            normal[0, keep],
+            owner_a[keep],
+            owner_b[keep],
+            travel[keep].reshape(len(keep), nv),
+        )
 
     def _attached_items(self) -> list[_Item]:
         return getattr(self, "_attached", [])
@@ -1080,6 +1119,40 @@ def _joined(
         np.concatenate([batch.owner_a, owner_a]),
         np.concatenate([batch.owner_b, owner_b]),
     )
+
+
+_ROUNDED = (shape_code(Sphere(1.0)), shape_code(Capsule(1.0, 1.0)))  # shapes that are their containing capsule
+_BOX_CODE, _CYLINDER_CODE = shape_code(Box((1.0, 1.0, 1.0))), shape_code(Cylinder(1.0, 1.0))
+
+
+def _containing_capsule(shape: Any) -> tuple[np.ndarray, float]:
+    """A capsule containing the shape, centred in its frame: (half its core segment as a vector, its radius) [m]:
+    spheres and capsules are their own; a cylinder's core is its axis with its radius; a box's its longest axis
+    with the half diagonal of the other two; otherwise (meshes) the bounding sphere."""
+    if isinstance(shape, (Sphere, Capsule, Cylinder)):
+        return np.array([0.0, 0.0, getattr(shape, "length", 0.0) / 2]), float(shape.radius)
+    if isinstance(shape, Box):
+        half = np.asarray(shape.size, dtype=float) / 2
+        longest = int(np.argmax(half))
+        axis = np.zeros(3)
+        axis[longest] = half[longest]
+        return axis, float(np.linalg.norm(np.delete(half, longest)))
+    return np.zeros(3), float(shape.bounding_radius())
+
+
+def _support(att: _Item, direction: np.ndarray) -> np.ndarray:
+    """The object's farthest points (N, 3) in its frame along unit ``direction`` (N, 3) (its frame) for the
+    engine's closed-form shapes: box, sphere, capsule, cylinder (z axis)."""
+    size, core = att.size, att.core
+    if att.kind == _BOX_CODE:
+        return np.sign(direction) * size
+    point = np.zeros_like(direction)
+    point[:, 2] = np.sign(direction[:, 2]) * size[2]  # capsules' and cylinders' half lengths (spheres: 0)
+    if att.kind == _CYLINDER_CODE:
+        across = np.hypot(direction[:, 0], direction[:, 1])
+        point[:, :2] = size[0] * direction[:, :2] / np.maximum(across, 1e-12)[:, None]
+        return point
+    return point + core * direction
 
 
 def _segment_frame(start: np.ndarray, end: np.ndarray) -> np.ndarray:
