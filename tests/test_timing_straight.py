@@ -10,6 +10,7 @@ import taplan
 from taplan.errors import InvalidInputError
 from taplan.limits import JointLimits
 from taplan.timing import jerk_limited, limit_usage, retime, straight_line
+from taplan.timing.straight import rest_to_rest_time
 
 
 def _one_joint(v: float, a: float, j: float) -> JointLimits:
@@ -101,3 +102,18 @@ def test_near_cubic_bounds_contain_the_sampled_range_and_peaks() -> None:
         exact = max_abs_derivative(traj, order).max(axis=0)
         assert np.all(peaks[order - 1] >= exact)
         np.testing.assert_allclose(peaks[order - 1], exact, rtol=1e-7)
+
+
+def test_rest_to_rest_time_equals_ruckigs_one_joint_duration() -> None:
+    """The closed-form time-optimal rest-to-rest duration (the fallback timings' floor in plan_motion) equals
+    ruckig's one-joint duration in every regime: cruise or not, acceleration limit reached or not."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        v, a, j = rng.uniform(0.1, 3.0), rng.uniform(0.2, 10.0), rng.uniform(0.5, 80.0)
+        length = 10 ** rng.uniform(-4, 0.9)
+        expected = straight_line([0.0], [length], _one_joint(v, a, j)).duration
+        assert rest_to_rest_time(length, v, a, j) == pytest.approx(expected, abs=1e-9)  # [s]
+    several = rest_to_rest_time([0.0, 0.3, 2.0], [1.0, 1.0, 1.0], 2.0, 10.0)  # broadcast over joints
+    assert several.shape == (3,) and several[0] == 0.0 and several[1] < several[2]
+    with pytest.raises(InvalidInputError, match="distance"):
+        rest_to_rest_time(-0.1, 1.0, 1.0, 1.0)

@@ -539,8 +539,9 @@ def _time_and_verify(
             lowest, lowest_pair = check.min_clearance, check.pair
 
     # A straight segment gets ruckig's time-optimal jerk-limited motion on it; polylines the filtered TOPP-RA. The
-    # first timing is the fastest: when it verifies it is the plan. Otherwise every other timing is computed (cheap
-    # next to a verification) and they are verified shortest first, so a slower fallback is the fastest that is safe.
+    # first timing is the fastest: when it verifies it is the plan. Otherwise the other timings are verified shortest
+    # first, so a slower fallback is the fastest that is safe; a timing is computed only when it could be shorter than
+    # the shortest one computed (its floor, :func:`_duration_floor`, is not longer): the same order as computing all.
     def timed(how: _Timing) -> Trajectory:
         scaled = sub.replace(
             velocity=sub.velocity * how.speed, acceleration=sub.acceleration * how.speed, jerk=sub.jerk * how.speed
@@ -574,9 +575,7 @@ def _time_and_verify(
     verified = 0
     options = _timings(len(path) == 2, max_deviation)
     took = 0.0  # [s] the longest timing so far: another one starts only if that much of the budget is left
-    for rank, how in enumerate(options[:-1]):
-        if rank and (not fallbacks or time.perf_counter() + took >= deadline):
-            break
+    for how in options[:1]:  # the fastest expected
         clock = time.perf_counter()
         try:
             middle = timed(how)
@@ -586,9 +585,6 @@ def _time_and_verify(
         finally:
             took = max(took, time.perf_counter() - clock)
             times["timing"] += time.perf_counter() - clock
-        if rank:
-            candidates.append((middle.duration, rank, how, middle))
-            continue
         verified += 1
         clock = time.perf_counter()
         if how.step is None and certificate is not None and _on_certified_segment(world, middle, path, margin):
@@ -620,7 +616,30 @@ def _time_and_verify(
             times["timing"] += time.perf_counter() - clock
         return [(middle.duration, last, options[last], middle)]
 
-    queue = sorted(candidates, key=lambda c: (c[0], c[1])) or last_resort()
+    floor_of = {rank: _duration_floor(path, active, sub, how) for rank, how in enumerate(options[:last]) if rank}
+    pending = sorted(floor_of, key=lambda rank: (floor_of[rank], rank))  # fallbacks not computed yet
+
+    def shortest() -> list[tuple[float, int, _Timing, Trajectory]]:
+        """The shortest fallback by (duration, rank), computing those whose floor does not rule them out."""
+        nonlocal why, took
+        while pending and (not candidates or floor_of[pending[0]] <= candidates[0][0]):
+            if time.perf_counter() + took >= deadline:
+                pending.clear()
+                break
+            rank = pending.pop(0)
+            clock = time.perf_counter()
+            try:
+                middle = timed(options[rank])
+                candidates.append((middle.duration, rank, options[rank], middle))
+                candidates.sort(key=lambda c: (c[0], c[1]))
+            except TimingError as exc:
+                why = f"timing the path failed: {exc}"
+            finally:
+                took = max(took, time.perf_counter() - clock)
+                times["timing"] += time.perf_counter() - clock
+        return [candidates.pop(0)] if candidates else []
+
+    queue = shortest() or last_resort()
     while queue:
         duration, rank, how, middle = queue.pop(0)
         if time.perf_counter() >= deadline:
@@ -637,9 +656,22 @@ def _time_and_verify(
                 fallback += f" (the fastest timing, {first[0]:.3f} s, {first[1]})"
             return _finish(ends, middle, check, lowest, lowest_pair, verified, fallback)
         why = _too_close(check, margin / 4)
-        if not queue and rank < last:
-            queue = last_resort()
+        if rank < last:
+            queue = shortest() or last_resort()
     return f"{why} after {verified} verified timings: not returned"
+
+
+def _duration_floor(path: list[np.ndarray], active: np.ndarray, limits: JointLimits, how: _Timing) -> float:
+    """A lower bound [s] of the duration of any timing of ``path`` under ``limits`` scaled by ``how.speed``: a timing
+    goes from rest at the first waypoint to rest at the last (zero velocity and acceleration, as every plan) within
+    the velocity, acceleration and jerk limits, so each joint takes at least the time-optimal rest-to-rest motion of
+    its displacement (:func:`rest_to_rest_time`)."""
+    from taplan.timing.straight import rest_to_rest_time
+
+    travel = np.abs(path[-1][active] - path[0][active])
+    s = how.speed
+    times = rest_to_rest_time(travel, limits.velocity * s, limits.acceleration * s, limits.jerk * s)
+    return float(np.max(times, initial=0.0)) * (1.0 - 1e-9)
 
 
 def _too_close(check: Any, floor: float) -> str:

@@ -22,7 +22,7 @@ from taplan.errors import InvalidInputError, TimingError
 from taplan.limits import JointLimits
 from taplan.trajectory import Trajectory
 
-__all__ = ["straight_line", "state_to_state", "state_to_state_pieces"]
+__all__ = ["straight_line", "state_to_state", "state_to_state_pieces", "rest_to_rest_time"]
 
 _SWITCH_TOL = 1e-9  # [s] phase switches closer than this are one breakpoint
 
@@ -50,6 +50,31 @@ def straight_line(start: npt.ArrayLike, goal: npt.ArrayLike, limits: JointLimits
     if not np.allclose(trajectory(trajectory.duration), b, atol=1e-7):
         raise TimingError("ruckig's straight-line motion does not end at the goal")
     return trajectory
+
+
+def rest_to_rest_time(
+    distance: npt.ArrayLike, velocity: npt.ArrayLike, acceleration: npt.ArrayLike, jerk: npt.ArrayLike
+) -> np.ndarray:
+    """The shortest time [s] of a one-joint motion over ``distance`` [rad] (elementwise, >= 0) from rest to rest
+    (zero velocity and acceleration at both ends) within the ``velocity``, ``acceleration`` and ``jerk`` limits:
+    the symmetric bang-bang jerk profile, in closed form. Accelerating to a peak speed ``V`` takes
+    ``V/a + a/j`` when ``V >= a²/j`` (the acceleration limit reached), else ``2 sqrt(V/j)``, and covers half of
+    ``V`` times that; the peak is ``velocity`` when the distance allows it (then a cruise), else the ``V`` whose
+    acceleration and deceleration cover the distance. A motion of several joints lasts at least each one's."""
+    d, v, a, j = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (distance, velocity, acceleration, jerk)))
+    if np.any(d < 0) or np.any(v <= 0) or np.any(a <= 0) or np.any(j <= 0):
+        raise InvalidInputError("distance/limits", "a negative distance or a limit <= 0", "distance >= 0, limits > 0")
+    corner = a * a / j  # [rad/s] the peak speed from which the acceleration limit is reached
+
+    def ramp(speed: np.ndarray) -> np.ndarray:  # [s] from rest to ``speed`` (and back to zero acceleration)
+        return np.where(speed >= corner, speed / a + a / j, 2.0 * np.sqrt(speed / j))
+
+    cruising = d >= v * ramp(v)  # accelerating to the limit and back covers v * ramp(v)
+    # below the limit: V ramp(V) = d, with V = a/2 (sqrt((a/j)² + 4 d / a) − a/j) when V >= a²/j, else 2 V^1.5 / sqrt(j)
+    high = a / 2 * (np.sqrt((a / j) ** 2 + 4.0 * d / a) - a / j)
+    low = np.cbrt((d * np.sqrt(j) / 2.0) ** 2)
+    peak = np.where(high >= corner, high, low)
+    return np.where(cruising, d / v + ramp(v), 2.0 * ramp(peak))
 
 
 def state_to_state(
