@@ -488,9 +488,9 @@ class CollisionWorld:
         rows[own] = travel[columns]
         if not own.all():
             E, _ = engine.segments(Q, jacobian=False)
-            found = self._attached_many(Q, E, bound_beyond, False)
-            index = {pair: k for k, pair in enumerate(found[0])}
             objects = np.flatnonzero(~own)
+            found = self._attached_many(Q, E, bound_beyond, False, only={wanted[k] for k in objects.tolist()})
+            index = {pair: k for k, pair in enumerate(found[0])}
             column = [index.get(wanted[k], -1) for k in objects.tolist()]
             if -1 in column:
                 return None
@@ -817,16 +817,24 @@ class CollisionWorld:
             )
         return out
 
-    def _attached_many(self, Q: np.ndarray, E: np.ndarray, bound_beyond: float, jacobians: bool) -> tuple:
+    def _attached_many(
+        self,
+        Q: np.ndarray,
+        E: np.ndarray,
+        bound_beyond: float,
+        jacobians: bool,
+        only: set[tuple[str, str]] | None = None,
+    ) -> tuple:
         """:meth:`_attached_distances` without a cutoff at N configurations ``Q`` (N, nq) whose body end points
         are ``E`` (N, B, 2, 3), for all configurations at once. With the engine (``use_engine``) an object with a
         closed form (box, sphere, capsule, cylinder) gets its robot body pairs in closed form (the body's capsule
         against the object, in the object's frame: :func:`~taplan.scene.engine.solid_pairs`) and half-spaces by
         its support point; against solid obstacles its containing capsule bounds it (exact for spheres and
         capsules). coal runs only for the pairs those bounds keep within ``bound_beyond`` (and meshes,
-        penetrations of a body's axis); the others report their bound. Returns the pairs' names, distances (N, A),
-        witness points and normals (N, A, 3), owners (A,), travel rows (A, nv) and, with ``jacobians``, the WORLD
-        joint Jacobians (N, 6, nv) of the configurations."""
+        penetrations of a body's axis); the others report their bound. ``only``: these pairs alone (by name; a
+        certificate's later levels need a few). Returns the pairs' names, distances (N, A), witness points and
+        normals (N, A, 3), owners (A,), travel rows (A, nv) and, with ``jacobians``, the WORLD joint Jacobians
+        (N, 6, nv) of the configurations."""
         model, data = self.model, self.data
         N, nv = len(Q), model.nv
         attached = self._attached_items()
@@ -846,21 +854,30 @@ class CollisionWorld:
         owner_a: list[np.ndarray] = []
         owner_b: list[np.ndarray] = []
         travel: list[np.ndarray] = []
+
+        def wanted(att: _Item, other: str) -> bool:
+            return only is None or (att.name, other) in only
+
         for a, att in enumerate(attached):
             parent = model.frames[att.frame].parentJoint
-            columns.append(self._attached_items_columns(att, frames[:, a], bound_beyond))
-            for item in self._items:
-                names.append((att.name, item.name))
+            items = np.array([m for m, item in enumerate(self._items) if wanted(att, item.name)], dtype=int)
+            columns.append(self._attached_items_columns(att, frames[:, a], bound_beyond, items))
+            for m in items.tolist():
+                names.append((att.name, self._items[m].name))
                 owner_b.append(np.zeros(1, dtype=int))
                 travel.append(att.reach[None])
-            listed = np.array([k for k, body in enumerate(self.bodies) if body.name not in att.touch], dtype=int)
+            listed = np.array(
+                [k for k, body in enumerate(self.bodies) if body.name not in att.touch and wanted(att, body.name)],
+                dtype=int,
+            )
             columns.append(self._attached_bodies_columns(att, frames[:, a], E[:, listed], listed, bound_beyond))
             names += [(att.name, self.bodies[k].name) for k in listed.tolist()]
             owner_b.append(self._body_joint[listed])
             travel.append(att.reach[None] + self._body_reach[listed])
-            owner_a.append(np.full(len(self._items) + len(listed), parent))
+            owner_a.append(np.full(len(items) + len(listed), parent))
             center = frames[:, a, :3, 3]
-            for o in self._fields:  # against the object's bounding sphere: a lower bound of its distance
+            fields = [o for o in self._fields if wanted(att, o.name)]
+            for o in fields:  # against the object's bounding sphere: a lower bound of its distance
                 R, t = o.pose[:3, :3], o.pose[:3, 3]
                 local = (center - t) @ R
                 fd, fpa, fpb, fn = o.shape.capsule_distances(local, local, np.full(N, att.radius), math.inf)
@@ -935,25 +952,27 @@ class CollisionWorld:
             )
         return d.reshape(N, L), pa.reshape(N, L, 3), pb.reshape(N, L, 3), normal.reshape(N, L, 3)
 
-    def _attached_items_columns(self, att: _Item, frames: np.ndarray, bound_beyond: float) -> tuple[np.ndarray, ...]:
-        """The object ``att`` (placed at ``frames`` (N, 4, 4)) against every obstacle item: (d (N, M), p_a on the
-        object, p_b on the item, normal from item to object). Half-spaces by the object's support point where it
-        has a closed form (exact); solids by the object's containing capsule in closed form (exact for spheres
-        and capsules) or its bounding sphere, and coal where that bound is within ``bound_beyond``."""
-        N, M = len(frames), len(self._items)
+    def _attached_items_columns(
+        self, att: _Item, frames: np.ndarray, bound_beyond: float, which: np.ndarray
+    ) -> tuple[np.ndarray, ...]:
+        """The object ``att`` (placed at ``frames`` (N, 4, 4)) against the obstacle items ``which`` (M,): (d (N, M),
+        p_a on the object, p_b on the item, normal from item to object). Half-spaces by the object's support point
+        where it has a closed form (exact); solids by the object's containing capsule in closed form (exact for
+        spheres and capsules) or its bounding sphere, and coal where that bound is within ``bound_beyond``."""
+        N, M = len(frames), len(which)
         R, c = frames[:, :3, :3], frames[:, :3, 3]
         d, pa, pb, normal = np.empty((N, M)), np.empty((N, M, 3)), np.empty((N, M, 3)), np.empty((N, M, 3))
         closed = self.use_engine and att.kind >= 0
-        for m, item in enumerate(self._items):
-            request = self._request
+        for col, m in enumerate(which.tolist()):
+            item, request = self._items[m], self._request
             if item.halfspace and closed:
                 up = item.pose[:3, 2]  # the half-space's outward normal
                 point = c + np.einsum("nkj,nj->nk", R, _support(att, -up @ R))  # the object's deepest point
-                d[:, m] = (point - item.center) @ up
-                pa[:, m], pb[:, m], normal[:, m] = point, point - d[:, m, None] * up, up
+                d[:, col] = (point - item.center) @ up
+                pa[:, col], pb[:, col], normal[:, col] = point, point - d[:, col, None] * up, up
                 continue
             if item.halfspace:
-                d[:, m] = -np.inf  # no bound for a half-space: always the exact query
+                d[:, col] = -np.inf  # no bound for a half-space: always the exact query
             elif closed and self._item_kind[m] >= 0:
                 # the object's containing capsule (its core segment along ``axis``, ``rounding``) as the "robot"
                 # capsule against the item, in the item's frame: exact when the object is that capsule
@@ -969,12 +988,12 @@ class CollisionWorld:
                     e1,
                     np.full(N, rounding),
                 )
-                d[:, m] = np.where(inside, -np.inf, d_k)
-                pa[:, m], pb[:, m], normal[:, m] = pa_k @ Ri.T + ci, pb_k @ Ri.T + ci, n_k @ Ri.T
+                d[:, col] = np.where(inside, -np.inf, d_k)
+                pa[:, col], pb[:, col], normal[:, col] = pa_k @ Ri.T + ci, pb_k @ Ri.T + ci, n_k @ Ri.T
                 if att.kind in _ROUNDED:  # the object is its capsule: exact but for penetrations of its axis
                     request = self._depth_request
                     for n in np.flatnonzero(inside).tolist():
-                        d[n, m], pa[n, m], pb[n, m], normal[n, m] = self._pair(
+                        d[n, col], pa[n, col], pb[n, col], normal[n, col] = self._pair(
                             item.geometry, item.transform, att.geometry, self._placed(frames[n]), request
                         )
                     continue
@@ -982,10 +1001,10 @@ class CollisionWorld:
                 away = c - item.center
                 apart = np.linalg.norm(away, axis=-1)
                 unit = away / np.maximum(apart, 1e-12)[:, None]
-                d[:, m], normal[:, m] = apart - item.radius - att.radius, unit
-                pa[:, m], pb[:, m] = c - att.radius * unit, item.center + item.radius * unit
-            for n in np.flatnonzero(d[:, m] <= bound_beyond).tolist():
-                d[n, m], pa[n, m], pb[n, m], normal[n, m] = self._pair(
+                d[:, col], normal[:, col] = apart - item.radius - att.radius, unit
+                pa[:, col], pb[:, col] = c - att.radius * unit, item.center + item.radius * unit
+            for n in np.flatnonzero(d[:, col] <= bound_beyond).tolist():
+                d[n, col], pa[n, col], pb[n, col], normal[n, col] = self._pair(
                     item.geometry, item.transform, att.geometry, self._placed(frames[n]), request
                 )
         return d, pa, pb, normal
