@@ -196,3 +196,84 @@ def test_pairs_of_still_bodies_are_evaluated_once_per_curve(robot, world, monkey
     monkeypatch.setattr(world, "pair_distances", lambda *args, **kwargs: None)
     full = verify_trajectory(world, trajectory, floor=MARGIN / 4)
     assert (check.collision_free, check.min_clearance) == (full.collision_free, pytest.approx(full.min_clearance))
+
+
+def _polylines(
+    robot: taplan.Robot, world: CollisionWorld, count: int, vertices: int, step: float = 0.25
+) -> list[np.ndarray]:
+    """Right-arm polylines (edges up to ``step`` [rad] per joint) whose vertices keep the certificate's points."""
+    rng = np.random.default_rng(11)
+    limits = robot.planning_limits
+    arm = robot.group("right").indices
+    out = []
+    while len(out) < count:
+        q = robot.home.copy()
+        q[arm] += rng.uniform(-0.8, 0.8, 7)
+        path = [np.clip(q, limits.lower, limits.upper)]
+        for _ in range(vertices - 1):
+            q = path[-1].copy()
+            q[arm] += rng.uniform(-step, step, 7)
+            path.append(np.clip(q, limits.lower, limits.upper))
+        if all(world.min_distance(v)[0] > MARGIN / 2 + 2e-4 for v in path):
+            out.append(np.array(path))
+    return out
+
+
+def test_a_polyline_certificate_is_sound_and_agrees_with_its_edges_certificates(
+    robot, world, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """check_path (the vertices evaluated once, edges split where needed) gives the verdict of certifying every
+    edge with check_segments on these paths, with fewer configurations evaluated, and holds by dense sampling with
+    coal (no engine): margin / 2 between the evaluations."""
+    from taplan.planning.verify import check_path
+
+    reference = CollisionWorld(robot, world.scene, engine=False)
+    paths = _polylines(robot, world, 10, 6, step=0.5)
+    evaluated = [0]
+    pair_distances = world.pair_distances
+
+    def counted(Q: np.ndarray, pairs: tuple | None = None, **kwargs: object) -> object:
+        evaluated[0] += len(Q)
+        return pair_distances(Q, pairs, **kwargs)
+
+    monkeypatch.setattr(world, "pair_distances", counted)
+    whole, per_edge, counts = [], [], []
+    for path in paths:
+        evaluated[0] = 0
+        whole.append(check_path(world, path, MARGIN, points=MARGIN / 2).valid)
+        counts.append(evaluated[0])
+        evaluated[0] = 0
+        checks = check_segments(world, path[:-1], path[1:], MARGIN, points=MARGIN / 2)
+        per_edge.append(all(c.valid for c in checks))
+        counts[-1] -= evaluated[0]
+    assert whole == per_edge
+    assert any(whole) and not all(whole)  # both outcomes exercised
+    assert sum(counts) < 0  # fewer configurations evaluated in all
+    for path, valid in zip(paths, whole, strict=True):
+        if valid:
+            for a, b in zip(path[:-1], path[1:], strict=True):
+                lowest = min(reference.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 41))
+                assert lowest >= MARGIN / 2 - 1e-9
+
+
+def test_a_polyline_through_an_obstacle_or_malformed_is_refused(robot, world) -> None:
+    from taplan.planning.verify import check_path
+
+    paths = _polylines(robot, world, 40, 6)
+    clear = next(p for p in paths if check_path(world, p, MARGIN, points=MARGIN / 2).valid)
+    # a vertex moved into the table: the edges into and out of it are refused
+    inside = next(
+        q
+        for q in (clear[2] + np.eye(robot.nq)[j] * dq for j in robot.group("right").indices for dq in (0.6, -0.6, 1.2))
+        if world.min_distance(q)[0] < 0
+    )
+    blocked = clear.copy()
+    blocked[2] = inside
+    check = check_path(world, blocked, MARGIN, points=MARGIN / 2)
+    assert not check.valid and check.clearance < MARGIN / 2
+    # a zero-length edge (a repeated vertex) is certified by its ends
+    assert check_path(world, np.insert(clear, 3, clear[3], axis=0), MARGIN, points=MARGIN / 2).valid
+    with pytest.raises(taplan.errors.InvalidInputError, match="path"):
+        check_path(world, clear[:1], MARGIN)
+    with pytest.raises(taplan.errors.InvalidInputError, match="margin"):
+        check_path(world, clear, -1.0)

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from taplan.planning.compiled_check import ClearanceCheck
-from taplan.planning.verify import check_segment, check_segments
+from taplan.planning.verify import check_path, check_segment, check_segments
 from taplan.scene.world import CollisionWorld
 
 __all__ = [
@@ -141,8 +141,12 @@ def certify_path(
     world: CollisionWorld, path: list[np.ndarray], margin: float, deadline: float = float("inf")
 ) -> list[np.ndarray] | None:
     """``path`` (full configurations) with every edge certified to keep ``margin / 2`` (its points evaluated at
-    ``margin / 2`` too: the sampler's test already kept ``margin`` at its states), all edges in one batch; refused
-    edges are split in halves up to ``SPLITS`` deep. None when an edge still fails or ``deadline`` passes."""
+    ``margin / 2`` too: the sampler's test already kept ``margin`` at its states): first the whole polyline as one
+    curve (:func:`~taplan.planning.verify.check_path`: each vertex evaluated once, the edges split only where
+    needed); when that refuses it, the edges in one batch, refused edges split in halves up to ``SPLITS`` deep. None
+    when an edge still fails or ``deadline`` passes."""
+    if len(path) >= 2 and check_path(world, np.array(path), margin, points=margin / 2, deadline=deadline).valid:
+        return list(path)
     edges = [(a, b) for a, b in zip(path[:-1], path[1:], strict=True)]
     for _ in range(SPLITS + 1):
         if time.perf_counter() >= deadline:

@@ -30,7 +30,7 @@ from taplan.scene.world import CollisionWorld
 from taplan.timing._polynomial import derivative_bound
 from taplan.trajectory import Trajectory
 
-__all__ = ["SegmentCheck", "check_segment", "check_segments", "verify_trajectory", "Verification"]
+__all__ = ["SegmentCheck", "check_segment", "check_segments", "check_path", "verify_trajectory", "Verification"]
 
 MIN_CERTIFIED = 1e-4  # [m] below this clearance a step would be too small to certify: report a failure
 LOOKAHEAD = 0.1  # [s] window over which the peak joint speeds bound a trajectory step
@@ -139,6 +139,58 @@ def check_segments(
         known=None if known is None else (known.pairs, known.distance.reshape(len(curves), -1), known.travel),
     )
     return [SegmentCheck(valid, low, pair, count) for valid, low, pair, _, count in outcome]
+
+
+def check_path(
+    world: CollisionWorld, path: np.ndarray, margin: float, *, points: float | None = None, deadline: float = math.inf
+) -> SegmentCheck:
+    """Certify the polyline ``path`` (K, nq) as :func:`check_segments` certifies its K − 1 edges (``margin / 2``
+    everywhere, ``points`` at the evaluations), but as one curve: its first level is the K vertices, each evaluated
+    once (every edge shares its ends with its neighbours; the segments' default grid evaluated 4 + 1 points per edge,
+    the shared ones twice), and only the edges whose bound does not hold between their ends are split, into the
+    pieces their closest pair needs. A smoothed sampled path has short edges (0.1 rad), most of them certified by
+    their ends alone: 2-3x fewer evaluations than the segments' grid (issue 22's profile). The parameter ``s`` runs
+    from 0 to K − 1, edge ``k`` over ``[k, k + 1]``; ``clearance`` and ``pair`` are the lowest evaluated ones."""
+    if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not (0 <= margin < math.inf):
+        raise InvalidInputError("margin", margin, "a clearance >= 0 [m]")
+    if points is not None and not (isinstance(points, (int, float)) and 0 <= points < math.inf):
+        raise InvalidInputError("points", points, "a clearance >= 0 [m] or None")
+    P = np.asarray(path, dtype=float)
+    if P.ndim != 2 or len(P) < 2 or P.shape[1] != world.model.nq:
+        raise InvalidInputError("path", f"an array of shape {P.shape}", f"(K >= 2, {world.model.nq}) configurations")
+    floor = margin / 2
+    required = margin if points is None else max(float(points), floor + MIN_CERTIFIED)
+    delta = np.diff(P, axis=0)
+    step = np.abs(delta)
+    last = len(delta) - 1
+
+    def configurations(curve: np.ndarray, s: np.ndarray) -> np.ndarray:
+        k = np.clip(np.floor(s).astype(int), 0, last)
+        return P[k] + (s - k)[:, None] * delta[k]
+
+    def rate(curve: np.ndarray, a: np.ndarray, b: np.ndarray, travel: np.ndarray) -> np.ndarray:
+        """Per interval and pair, the travel rate per unit of ``s``: the edge's, or for an interval over several
+        edges (the whole path, to find the joints that never move) the largest step of each joint among them."""
+        first = np.clip(np.floor(a).astype(int), 0, last)
+        final = np.clip(np.ceil(b).astype(int) - 1, first, last)
+        steps = step[first].copy()
+        for i in np.flatnonzero(final > first):
+            steps[i] = step[first[i] : final[i] + 1].max(axis=0)
+        return steps @ travel.T
+
+    ((valid, low, pair, _, count),) = _certify_batch(
+        world,
+        1,
+        [np.arange(len(P), dtype=float)],
+        configurations,
+        rate,
+        floor,
+        required,
+        MIN_FRACTION,
+        deadline,
+        strict=False,
+    )
+    return SegmentCheck(valid, low, pair, count)
 
 
 def _certify_batch(
