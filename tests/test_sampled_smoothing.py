@@ -307,3 +307,45 @@ def test_the_sampled_path_is_certified_only_when_its_smoothed_path_is_not_used(
     plan = plan_motion(robot, robot.home, goal, world=world, stages=("rrt-connect",), max_time=20.0, seed=0)
     assert refused and searched == [False, True]  # searched again, certifying
     assert clearance(plan) >= MARGIN / 4 - 1e-9
+
+
+def test_the_smoother_tests_at_its_own_spacing_and_its_path_is_certified_as_one_polyline(
+    robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The smoother's compiled test spaces its states SMOOTH_SPACING_SHARE x the margin apart (coarser than the
+    exploration's: the smoothed path is certified afterwards), and the smoothed path's certificate is the polyline
+    one (check_path, valid at the first try): every edge keeps half the margin by dense sampling."""
+    from taplan.planning import rrt, verify
+    from taplan.planning.rrt import SMOOTH_SPACING_SHARE
+
+    assert SMOOTH_SPACING_SHARE > SPACING_SHARE
+    world = _box_on_table(robot)
+    goal = _two_arm_goal(robot)
+    spacings: list[float] = []
+    polylines: list[bool] = []
+    real_motion, real_check_path = ClearanceCheck.motion, verify.check_path
+
+    def recording_motion(self, a, b, spacing):  # noqa: ANN001, ANN202 (a stand-in)
+        spacings.append(spacing)
+        return real_motion(self, a, b, spacing)
+
+    def recording_check_path(*args, **options):  # noqa: ANN002, ANN003, ANN202 (a stand-in)
+        found = real_check_path(*args, **options)
+        polylines.append(found.valid)
+        return found
+
+    monkeypatch.setattr(rrt, "check_path", recording_check_path)
+    sampled = motion._find_path
+    monkeypatch.setattr(
+        motion,
+        "_find_path",
+        lambda *args, **options: (sampled(*args, **options), spacings.clear(), polylines.clear())[0],
+    )
+    monkeypatch.setattr(ClearanceCheck, "motion", recording_motion)
+    plan = plan_motion(robot, robot.home, goal, world=world, stages=("rrt-connect",), max_time=20.0, seed=3)
+    assert plan.report.smoothed
+    assert spacings and all(s == pytest.approx(SMOOTH_SPACING_SHARE * MARGIN) for s in spacings)  # the smoother's
+    assert polylines == [True]  # certified as one polyline, no edge-by-edge pass
+    for a, b in zip(plan.path[:-1], plan.path[1:], strict=True):
+        lowest = min(world.min_distance(a + s * (b - a))[0] for s in np.linspace(0.0, 1.0, 11))
+        assert lowest >= MARGIN / 2 - 1e-9

@@ -56,7 +56,7 @@ from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
 from taplan.planning.optimize import optimize_path, resample
 from taplan.planning.rrt import (
-    SPACING_SHARE,
+    SMOOTH_SPACING_SHARE,
     certify_path,
     rrt_connect_groups,
     rrt_connect_shrinking,
@@ -275,7 +275,7 @@ def _smooth_sampled(
     groups = [np.intersect1d(g.indices, active) for g in world.robot.groups.values()]
     check = ClearanceCheck(world, margin, active)
     smooth = smooth_path(
-        lambda a, b: check.motion(a, b, SPACING_SHARE * margin),
+        lambda a, b: check.motion(a, b, SMOOTH_SPACING_SHARE * margin),
         path,
         active,
         [g for g in groups if g.size],
