@@ -282,8 +282,12 @@ def _sequential_convex(
         iterations += 1
         begin = time.perf_counter()
         G_x, h = _linearised(problem, evaluations, x, target)
-        m = G_x.shape[0]
+        # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
+        box_lo = np.minimum(np.maximum(lo, x - trust), x)
+        box_hi = np.maximum(np.minimum(hi, x + trust), x)
         soft = _soft_rows(G_x, h, x)
+        G_x, h, soft = _without_redundant_rows(G_x, h, soft, box_lo, box_hi)
+        m = G_x.shape[0]
         s = soft.size
         E = np.zeros((m, s))
         E[soft, np.arange(s)] = -1.0
@@ -297,9 +301,8 @@ def _sequential_convex(
         else:
             P = sp.block_diag([problem.P, sp.identity(s) * 1e-6]).tocsc()
             G = sp.hstack([sp.csr_matrix(G_x), sp.csr_matrix(E)]).tocsc() if m else sp.csc_matrix((0, problem.N))
-        # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
-        lb = np.concatenate([np.minimum(np.maximum(lo, x - trust), x), np.zeros(s)])
-        ub = np.concatenate([np.maximum(np.minimum(hi, x + trust), x), np.full(s, np.inf)])
+        lb = np.concatenate([box_lo, np.zeros(s)])
+        ub = np.concatenate([box_hi, np.full(s, np.inf)])
         # daqp stops at the deadline (one two-arm QP on the real body took 3.4 s under load): no solution, and the
         # next iteration does not start
         settings: dict[str, Any] = dict(OSQP_SETTINGS) if backend == "osqp" else {}
@@ -351,6 +354,21 @@ def _soft_rows(G_x: np.ndarray, h: np.ndarray, x: np.ndarray) -> np.ndarray:
     daqp (7 ms), with the same paths on the 39 benchmark problems (an exact penalty is hard wherever its multiplier
     stays below μ; where it does not, a hard row keeps the path out of a collision it was clear of)."""
     return np.flatnonzero(G_x @ x > h)
+
+
+def _without_redundant_rows(
+    G_x: np.ndarray, h: np.ndarray, soft: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``G_x x ≤ h`` without the hard rows that no ``x`` in the box ``[lower, upper]`` can violate (the largest
+    ``G_i x`` over the box, ``Σ_j max(G_ij lower_j, G_ij upper_j)``, is within ``h_i``): the same feasible set and
+    optimum with fewer rows (pairs within the cutoff that the trust region keeps clear; a third of cubby #38's first
+    QP: daqp 42 -> 37 ms); and the soft rows' new indices."""
+    reach = np.maximum(G_x * lower, G_x * upper).sum(axis=1)
+    keep = reach > h
+    keep[soft] = True
+    if keep.all():
+        return G_x, h, soft
+    return G_x[keep], h[keep], np.flatnonzero(np.isin(np.flatnonzero(keep), soft))
 
 
 def _stalled(violations: list[float]) -> bool:
