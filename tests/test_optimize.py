@@ -194,3 +194,39 @@ def test_giving_up_a_stalled_optimisation_stops_early_and_leaves_a_converging_on
     plain = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
     assert kept is not None and plain is not None
     np.testing.assert_array_equal(kept.path, plain.path)  # [rad]
+
+
+def test_rows_no_point_of_the_trust_box_can_violate_are_left_out_with_the_same_optimum() -> None:
+    """_without_redundant_rows drops only hard rows that hold everywhere in the box (checked at its corners along
+    each row, the worst case, and at random points), keeps every soft row (re-indexed to the same rows), and the
+    QP with the remaining rows has the same solution."""
+    import qpsolvers
+
+    rng = np.random.default_rng(4)
+    n, m = 12, 60
+    G = rng.normal(size=(m, n))
+    x = rng.uniform(-0.5, 0.5, n)
+    lower, upper = x - 0.1, x + 0.1
+    h = G @ x + rng.uniform(-0.05, 1.0, m)  # some rows violated at x (soft), some far from any box point
+    soft = np.flatnonzero(G @ x > h)
+    G_kept, h_kept, soft_kept = optimize_module._without_redundant_rows(G, h, soft, lower, upper)
+    assert 0 < len(G_kept) < m and soft.size > 0
+    np.testing.assert_array_equal(G_kept[soft_kept], G[soft])  # the soft rows, found at their new indices
+    kept = {tuple(row) for row in G_kept}
+    dropped = np.array([k for k in range(m) if tuple(G[k]) not in kept])
+    corner = np.where(G[dropped] > 0, upper, lower)  # the box point that maximises each dropped row
+    assert np.all(np.einsum("kj,kj->k", G[dropped], corner) <= h[dropped])
+    samples = rng.uniform(lower, upper, (2000, n))
+    assert np.all(samples @ G[dropped].T <= h[dropped])
+
+    def solve(rows: np.ndarray, bounds: np.ndarray, soft_rows: np.ndarray) -> np.ndarray:
+        s = soft_rows.size
+        E = np.zeros((len(rows), s))
+        E[soft_rows, np.arange(s)] = -1.0
+        P = np.eye(n + s) * 1e-6
+        P[:n, :n] = 2.0 * np.eye(n)
+        q = np.concatenate([-2.0 * x + 0.3, np.full(s, 10.0)])
+        lb, ub = np.concatenate([lower, np.zeros(s)]), np.concatenate([upper, np.full(s, np.inf)])
+        return qpsolvers.solve_qp(P, q, np.hstack([rows, E]), bounds, lb=lb, ub=ub, solver="daqp")
+
+    np.testing.assert_allclose(solve(G_kept, h_kept, soft_kept), solve(G, h, soft), rtol=0, atol=1e-9)
