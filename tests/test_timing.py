@@ -366,3 +366,34 @@ def test_jerk_limited_on_a_coarser_grid_holds_every_limit(arm_limits: taplan.Joi
     assert coarse.trajectory.duration == pytest.approx(default.trajectory.duration, rel=0.05)
     np.testing.assert_allclose(coarse.trajectory(0.0), q[0], atol=POS_TOL)
     np.testing.assert_allclose(coarse.trajectory(coarse.trajectory.duration), q[-1], atol=POS_TOL)
+
+
+def test_a_path_filter_that_loses_in_its_first_round_costs_one_toppra_solve(
+    arm_limits: taplan.JointLimits, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """When the first round's TOPP-RA with the jerk terms already reaches ``beat``, the path filter stops after that
+    one solve (the TOPP-RA without them, faster, could not decide alone), and returns None as before."""
+    import sys
+
+    from taplan.timing.toppra_retime import as_path
+
+    module = sys.modules["taplan.timing.jerk_limited"]
+    path, _, _ = as_path(random_walk(arm_limits, 12, 3), arm_limits.size)
+    factors, repairs = module.DEFAULT_WIDTH_FACTORS, module.DEFAULT_REPAIRS
+    solves: list[float] = []
+    profile = module.time_optimal_profile
+
+    def counted(*args: object, **kwargs: object) -> object:
+        out = profile(*args, **kwargs)
+        solves.append(out.duration)
+        return out
+
+    monkeypatch.setattr(module, "time_optimal_profile", counted)
+    whole = module._path_filter(path, arm_limits, factors, 1.0, repairs, (4, 64), None)
+    with_jerk, without = solves[0], solves[1]  # the first round's solve, then the reference TOPP-RA
+    assert without < with_jerk and whole.topp_duration == without
+    width = min(factors) * float(np.max(arm_limits.acceleration / arm_limits.jerk))
+    beat = (without + with_jerk) / 2 + width  # the reference alone would not rule the filter out
+    solves.clear()
+    assert module._path_filter(path, arm_limits, factors, 1.0, repairs, (4, 64), None, beat) is None
+    assert len(solves) == 1  # [s] the first round's duration + width >= beat: stopped there
