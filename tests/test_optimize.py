@@ -157,6 +157,12 @@ def test_stalled_is_a_violation_that_stops_falling() -> None:
     assert _stalled([2.0] + [1.5] * STALL_WINDOW)  # fell by a quarter over the window
     assert not _stalled([2.0] + [0.9] * STALL_WINDOW)  # fell by more than half
     assert not _stalled([STALL_FLOOR] * (STALL_WINDOW + 1))  # nearly clear: left to finish
+    # violations after each QP inside plan_motion on benchmark problems [m]: stuck (window #18 of the 39-suite, given
+    # up after 3 QPs; cabinet #20 after 4), converging (an attached object clear after 8 QPs, an overhang clear after
+    # 5 whose violation stays at 0.19 over two rejected QPs): left alone
+    assert _stalled([2.22, 1.39, 1.36]) and _stalled([0.47, 0.30, 0.25, 0.22])
+    for converging in ([0.48, 0.39, 0.05, 0.07, 0.07, 0.07, 0.07, 0.01], [0.19, 0.19, 0.19, 0.02]):
+        assert not any(_stalled(converging[:k]) for k in range(1, len(converging) + 1))
 
 
 def _solves(monkeypatch) -> list[int]:
