@@ -37,31 +37,31 @@ def signed_distance(
     """
     result = coal.DistanceResult()
     d = float(coal.distance(g1, t1, g2, t2, request, result))
-    tried = [request.epa_tolerance]
-    for tolerance in RETRY_TOLERANCES:
-        if _usable(d, result) or tolerance <= request.epa_tolerance:
-            continue
-        result = coal.DistanceResult()
-        d = float(coal.distance(g1, t1, g2, t2, _retry_request(coal, tolerance), result))
-        tried.append(tolerance)
-    if not _usable(d, result):
-        raise DistanceQueryError(
-            f"coal found no signed distance between a {type(g1).__name__} and a {type(g2).__name__} "
-            f"(EPA tolerances {', '.join(f'{t:g}' for t in tried)} m; last answer {d:g} m)"
-        )
-    p1 = np.array(result.getNearestPoint1())
-    p2 = np.array(result.getNearestPoint2())
+    p1, p2 = result.getNearestPoint1(), result.getNearestPoint2()
+    if not _usable(d, p1, p2):
+        tried = [request.epa_tolerance]
+        for tolerance in RETRY_TOLERANCES:
+            if tolerance <= tried[0]:
+                continue
+            result = coal.DistanceResult()
+            d = float(coal.distance(g1, t1, g2, t2, _retry_request(coal, tolerance), result))
+            p1, p2 = result.getNearestPoint1(), result.getNearestPoint2()
+            tried.append(tolerance)
+            if _usable(d, p1, p2):
+                break
+        else:
+            raise DistanceQueryError(
+                f"coal found no signed distance between a {type(g1).__name__} and a {type(g2).__name__} "
+                f"(EPA tolerances {', '.join(f'{t:g}' for t in tried)} m; last answer {d:g} m)"
+            )
     n = np.array(result.normal, dtype=float)
     norm = float(np.linalg.norm(n))
     n = n / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-    return d, p1, p2, n
+    return d, np.array(p1), np.array(p2), n
 
 
-def _usable(d: float, result: Any) -> bool:
-    if not abs(d) < FAR:  # NaN too
-        return False
-    points = np.concatenate([result.getNearestPoint1(), result.getNearestPoint2()])
-    return bool(np.all(np.abs(points) < FAR))
+def _usable(d: float, p1: np.ndarray, p2: np.ndarray) -> bool:
+    return abs(d) < FAR and abs(p1).max() < FAR and abs(p2).max() < FAR  # False for NaN too
 
 
 def _retry_request(coal: Any, tolerance: float) -> Any:
