@@ -104,3 +104,37 @@ def test_a_clear_solution_from_the_start_seed_is_one_solve(
     q = _goal(robot, problem)
     _assert_reaches(robot, problem, q)
     assert len(calls) == 1 and calls[0]["seed"] == 0
+
+
+def test_a_solution_inside_the_margin_is_taken_only_with_a_certified_approach(robot: taplan.Robot) -> None:
+    """Problem 65 of the hard families (seed 1): an IK solution 3.2 mm from the shoulders had no certified approach
+    and plan_motion raised; the goal IK now skips such solutions, and the plan reaches the target."""
+    hard = ("window", "overhang", "cabinet", "poles", "chest_box", "divider", "attached", "cubby")
+    problem = problems(80, 1, hard)[65]
+    world = CollisionWorld(robot, problem.scene)
+    q = _goal(robot, problem, seed=65)
+    d = world.min_distance(q)[0]
+    assert d >= FLOOR
+    if d < MARGIN:  # [m] inside the margin: only with the segment the plan will follow
+        active = np.flatnonzero(np.abs(q - problem.start) > 1e-12)
+        limits = robot.planning_limits
+        assert motion.approach_segment(world, q, "goal", active, limits.lower, limits.upper, MARGIN, FLOOR)
+    plan = motion.plan_motion(robot, problem.start, problem.goal, world=world, max_time=5.0, seed=65)
+    for frame, target in problem.goal.items():  # [m] the timed trajectory ends on the targets
+        assert np.linalg.norm(robot.frame_pose(plan.path[-1], frame)[:3, 3] - target[:3, 3]) <= POSITION_TOL
+
+
+def test_near_solutions_without_an_approach_are_skipped(robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch) -> None:
+    near = [(0.1, 0, np.full(robot.nq, 1.0)), (0.2, 1, np.full(robot.nq, 2.0))]
+    tried: list[float] = []
+
+    def approach(world: Any, q: np.ndarray, *args: Any) -> Any:
+        tried.append(float(q[0]))
+        return None if q[0] == 1.0 else object()
+
+    monkeypatch.setattr(motion, "approach_segment", approach)
+    world = CollisionWorld(robot)
+    chosen = motion._approached(world, near, robot.home, robot.planning_limits, MARGIN, FLOOR)
+    assert chosen is not None and chosen[0] == 2.0 and tried == [1.0, 2.0]
+    monkeypatch.setattr(motion, "approach_segment", lambda *args: None)
+    assert motion._approached(world, near, robot.home, robot.planning_limits, MARGIN, FLOOR) is None

@@ -332,23 +332,26 @@ def _goal_ik(
     deadline: float,
 ) -> np.ndarray:
     """The start seed's goal IK solution when it is at least ``margin`` from everything, else the one closest to the
-    start among those at least ``margin`` away, else among those at least ``floor`` (their plans approach them along
-    a certified segment); seeds stop at ``deadline``. A first round gives each seed one short attempt and ends once
-    ``GOAL_IK_SEEDS`` seeds were tried and one gave a clear solution; a second round (only when no seed gave any)
-    gives each seed ``GOAL_IK_RESTARTS`` random restarts."""
+    start among those at least ``margin`` away, else among those at least ``floor`` that a certified segment
+    approaches (:func:`~taplan.planning.ends.approach_segment`: the plan needs one); seeds stop at ``deadline``. A
+    first round gives each seed one short attempt and ends once ``GOAL_IK_SEEDS`` seeds were tried and one gave a
+    clear solution; a second round (only when the first gave no usable one) gives each seed ``GOAL_IK_RESTARTS``
+    random restarts."""
     from taplan.ik.solve_pose import solve_pose
 
     lower, upper = limits.lower, limits.upper
     candidates = [start, robot.home] + [lower + rng.uniform(0, 1, robot.nq) * (upper - lower) for _ in range(seeds)]
-    best: dict[bool, np.ndarray] = {}  # clear of the margin (True) or only of the floor (False)
-    cost: dict[bool, float] = {True: np.inf, False: np.inf}
+    clear_best: np.ndarray | None = None
+    clear_cost = np.inf
+    near: list[tuple[float, int, np.ndarray]] = []  # solutions clear of the floor only: (distance to start, k, q)
+    approached: np.ndarray | None = None
     reason = "no IK solution within 1 mm / 0.01 rad"
     closest = (np.inf, np.inf)  # the best failed IK's position [m] and orientation [rad] error
     moving = np.isin(np.arange(robot.nq), _moving_joints(robot, targets))
     rounds = ((0, GOAL_IK_ITERATIONS), (GOAL_IK_RESTARTS, 100))  # (restarts, iterations per attempt)
     for restarts, iterations in rounds:
         for k, seed_q in enumerate(candidates):
-            if True in best and k >= GOAL_IK_SEEDS:
+            if clear_best is not None and k >= GOAL_IK_SEEDS:
                 break  # warm start: a clear solution, and the start, home and a random seed were tried
             if time.perf_counter() >= deadline:
                 reason = f"the goal IK's share of the time budget ran out after {k} seeds"
@@ -365,15 +368,23 @@ def _goal_ik(
             if d < floor:
                 reason = f"IK solutions collide ({pair[0]} / {pair[1]}: {d * 1e3:.1f} mm, {floor * 1e3:.1f} mm needed)"
                 continue
-            clear = d >= margin
             distance = float(np.linalg.norm(result.q - start))
-            if distance < cost[clear]:
-                best[clear], cost[clear] = result.q, distance
-            if clear and k == 0:
+            if d < margin:
+                near.append((distance, len(near), result.q))
+                continue
+            if distance < clear_cost:
+                clear_best, clear_cost = result.q, distance
+            if k == 0:
                 break  # warm start: the start seed's clear solution
-        if best or time.perf_counter() >= deadline:
+        if clear_best is None:
+            approached = _approached(world, sorted(near, key=lambda c: c[:2]), start, limits, margin, floor)
+            if approached is None and near:
+                reason = f"no certified segment approaches the {len(near)} IK solutions inside the margin"
+            near.clear()
+        if clear_best is not None or approached is not None or time.perf_counter() >= deadline:
             break
-    if not best:
+    best = clear_best if clear_best is not None else approached
+    if best is None:
         if reason.startswith("no IK solution") and np.isfinite(closest[0]):
             reason += f"; the closest ends {closest[0] * 1e3:.1f} mm / {closest[1]:.3f} rad from the target"
         inside = _targets_inside_obstacles(world, targets)
@@ -382,7 +393,24 @@ def _goal_ik(
         if np.isfinite(closest[0]) and closest[0] > 0.05:
             raise PlanningError(f"goal {sorted(targets)}: out of reach ({reason})")
         raise PlanningError(f"goal {sorted(targets)}: unreachable without collision ({reason})")
-    return best.get(True, best.get(False))
+    return best
+
+
+def _approached(
+    world: CollisionWorld,
+    near: list[tuple[float, int, np.ndarray]],
+    start: np.ndarray,
+    limits: JointLimits,
+    margin: float,
+    floor: float,
+) -> np.ndarray | None:
+    """The first of ``near`` (solutions inside the margin, closest to the start first) that a certified segment of
+    the joints it moves approaches (the segment plan_motion will follow), or None."""
+    for _, _, q in near:
+        active = np.flatnonzero(np.abs(q - start) > 1e-12)
+        if approach_segment(world, q, "goal", active, limits.lower, limits.upper, margin, floor) is not None:
+            return q
+    return None
 
 
 def _targets_inside_obstacles(world: CollisionWorld, targets: Mapping[str, Any]) -> str:
@@ -831,7 +859,7 @@ def plan_motion(
         if approach is None:
             raise PlanningError(
                 f"{end}: {pair[0]} is {d * 1e3:.1f} mm from {pair[1]} (margin {margin * 1e3:.1f} mm, floor "
-                f"{floor * 1e3:.1f} mm) and no short certified segment leads away from it with moving {pair[0]}"
+                f"{floor * 1e3:.1f} mm) and no short certified segment of the joints that move leads away from it"
             )
         approaches.append(approach)
     times["validate"] += time.perf_counter() - clock
