@@ -16,7 +16,8 @@
    (``"straight"``); sequential convex optimisation (:mod:`~taplan.planning.optimize`, TrajOpt-style) from the
    straight line, then from polylines through perturbed midpoints (``"optimization"``; the straight line only, for
    a quarter of the search time and ``OPTIMIZE_ITERATIONS`` QPs, when the sampler follows, and given up when it
-   stalls in collision: :data:`~taplan.planning.optimize.STALL_WINDOW`); RRT-Connect
+   stalls in collision: :data:`~taplan.planning.optimize.STALL_WINDOW`, or is still deep in it after
+   :data:`~taplan.planning.optimize.STALL_BUDGET` of CPU); RRT-Connect
    (:mod:`~taplan.planning.rrt`, exploring with a compiled clearance test; when both arms move, first one arm
    after the other) with shortcutting, then smoothed with the same test (the arms moved together, shortcuts along
    the path, corners blended), resampled evenly and certified again (``"rrt-connect"``); in

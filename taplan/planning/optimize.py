@@ -60,6 +60,16 @@ REFINEMENTS = 4  # segment splits after a failed certification
 # 414 -> 275 ms), and one the old rule gave up (an attached object whose violation stays at 0.07 for 4 QPs, clear
 # after 8) left to finish; the floor keeps a nearly clear one (0.19 for two rejected QPs, clear after 5) going
 STALL_WINDOW, STALL_RATIO, STALL_FLOOR = 2, 0.6, 0.2
+# ``give_up_stalled`` also stops an optimisation whose kept path is still above STALL_FLOOR after STALL_BUDGET [s] of
+# the calling thread's CPU (its own work, whatever the load) when its last QP left more than BUDGET_RATIO of the
+# violation. Deep two-arm collisions (window family) have first QPs of 400-490 variables that take daqp/osqp
+# 50-220 ms each: the stall rule's 3 QPs cost 430 ms CPU on window #174 of problems(200, 0) (6.86 -> 3.62 -> 3.62
+# -> 2.88 m); window #148 got below the floor only after 406 ms and 4 QPs (9.17 -> 4.72 -> 3.45 -> 2.09 -> 1.16),
+# into a 2.92 s plan where the sampler's is 2.16 s. The optimisations kept on seeds 0 and 1 got below the floor
+# within 97 ms (clutter #108), but cabinet #176 of problems(200, 1): its first QP (433 variables) took 307 ms and
+# cut 5.37 to 0.65 (to 12 %), clear after the next (CPU at load 2-3; issue 22, i22g notes)
+STALL_BUDGET = 0.12
+BUDGET_RATIO = 0.25
 POINTS = 0.5  # its segments are certified at margin / 2 (every planner edge): evaluated points need no more
 
 
@@ -188,12 +198,14 @@ def optimize_path(
             QPs (6.5 ms against proxqp's 12 ms sparse and 24 ms dense, same solution to 1e-6), and osqp's sparse
             ADMM above ``LARGE_QP`` variables.
         give_up_stalled: Stop early when the path stays in collision and its violation stops falling
-            (``STALL_WINDOW``): for a caller with another planner to go to (the sampler).
+            (``STALL_WINDOW``) or is still above ``STALL_FLOOR`` after ``STALL_BUDGET`` of this thread's CPU: for a
+            caller with another planner to go to (the sampler).
     """
     if solver != "auto" and solver not in qpsolvers.available_solvers:
         valid = f"'auto' or an installed qpsolvers backend {qpsolvers.available_solvers}"
         raise InvalidInputError("solver", solver, valid)
     path = np.asarray(path, dtype=float)
+    started = time.thread_time()  # the stall budget counts this thread's CPU: the optimiser's own work
     full = path[0].copy()
     seed = path[:, active]
     length = float(np.abs(np.diff(seed, axis=0)).max(axis=1).sum())
@@ -211,7 +223,7 @@ def optimize_path(
             max_iterations - iterations,
             deadline,
             solver,
-            give_up_stalled,
+            started if give_up_stalled else None,
         )
         iterations += used
         if optimized is None:
@@ -262,10 +274,12 @@ def _sequential_convex(
     max_iterations: int,
     deadline: float,
     solver: str,
-    give_up_stalled: bool = False,
+    stall_since: float | None = None,
 ) -> tuple[np.ndarray | None, int, KnownDistances | None]:
     """The SCP iterations from ``x_path`` (K, n active): (optimised path or None when still colliding, QPs, every
-    pair's distances along the path's segments from its last evaluation, when the engine made it)."""
+    pair's distances along the path's segments from its last evaluation, when the engine made it). With
+    ``stall_since`` (``time.thread_time()`` at the optimisation's start) it gives up when stalled in collision
+    (:func:`_stalled`) or still in collision after ``STALL_BUDGET`` (:func:`_over_budget`)."""
     K = len(x_path)
     problem = _Problem(x_path[0], x_path[-1], K)
     inset = np.minimum(LIMIT_INSET, (upper[active] - lower[active]) / 4)
@@ -276,12 +290,16 @@ def _sequential_convex(
     trust, mu = 0.2, 10.0
     x = x_path[1:-1].ravel()
     evaluations, known = _evaluate(world, full, x_path, active, cutoff)
-    merit = problem.cost(x) + mu * _violation(evaluations, target)
+    initial = _violation(evaluations, target)
+    merit = problem.cost(x) + mu * initial
     iterations = 0
     longest = 0.0  # [s] the longest iteration so far: another starts only if that much is left before the deadline
     violations: list[float] = []  # of the kept path after each QP
     while iterations < max_iterations and time.perf_counter() + longest < deadline:
-        if give_up_stalled and _stalled(violations):
+        stuck = stall_since is not None and (
+            _stalled(violations) or _over_budget([initial, *violations], time.thread_time() - stall_since)
+        )
+        if stuck:
             break
         iterations += 1
         begin = time.perf_counter()
@@ -383,6 +401,15 @@ def _stalled(violations: list[float]) -> bool:
         return False
     now, before = violations[-1], violations[-1 - STALL_WINDOW]
     return now > STALL_FLOOR and now > STALL_RATIO * before
+
+
+def _over_budget(violations: list[float], spent: float) -> bool:
+    """Whether an optimisation whose kept path's constraint violations [m] were ``violations`` (at its start, then
+    after each QP) after ``spent`` [s] of its thread's CPU should give up: still above ``STALL_FLOOR`` after
+    ``STALL_BUDGET``, and its last QP cut the violation to more than ``BUDGET_RATIO`` of what it was."""
+    if len(violations) < 2 or spent <= STALL_BUDGET:
+        return False
+    return violations[-1] > STALL_FLOOR and violations[-1] > BUDGET_RATIO * violations[-2]
 
 
 def _shrunk_trust(trust: float, step: float) -> float:
