@@ -117,3 +117,36 @@ def test_rest_to_rest_time_equals_ruckigs_one_joint_duration() -> None:
     assert several.shape == (3,) and several[0] == 0.0 and several[1] < several[2]
     with pytest.raises(InvalidInputError, match="distance"):
         rest_to_rest_time(-0.1, 1.0, 1.0, 1.0)
+
+
+def test_state_to_state_pieces_follow_ruckigs_motion_on_both_arms(teleavatar) -> None:
+    """The pieces integrate ruckig's constant jerk per phase (a running sum over the pieces): positions, velocities
+    and accelerations equal ruckig's own motion at any time, for 14 joints from moving states."""
+    import ruckig
+
+    from taplan.timing.straight import state_to_state
+
+    limits = teleavatar.planning_limits
+    n = limits.size
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        start = (
+            teleavatar.home + rng.uniform(-0.3, 0.3, n),
+            0.3 * limits.velocity * rng.uniform(-1, 1, n),
+            np.zeros(n),
+        )
+        goal = (teleavatar.home + rng.uniform(-0.5, 0.5, n), 0.2 * limits.velocity * rng.uniform(-1, 1, n), np.zeros(n))
+        motion = state_to_state(start, goal, limits)
+        request = ruckig.InputParameter(n)
+        request.current_position, request.current_velocity, request.current_acceleration = (x.tolist() for x in start)
+        request.target_position, request.target_velocity, request.target_acceleration = (x.tolist() for x in goal)
+        request.max_velocity = limits.velocity.tolist()
+        request.max_acceleration = limits.acceleration.tolist()
+        request.max_jerk = limits.jerk.tolist()
+        reference = ruckig.Trajectory(n)
+        ruckig.Ruckig(n).calculate(request, reference)
+        assert motion.duration == pytest.approx(reference.duration, abs=1e-12)
+        for t in np.linspace(0.0, motion.duration, 97):
+            expected = reference.at_time(float(t))
+            for k in range(3):  # [rad], [rad/s], [rad/s²]: ruckig's own states drift by up to a few 1e-9
+                np.testing.assert_allclose(motion(t, k), expected[k], atol=1e-8)

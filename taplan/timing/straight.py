@@ -147,15 +147,22 @@ def _ruckig_pieces(
     times = np.unique(np.clip(switches, 0.0, motion.duration))
     times = times[np.concatenate([[True], np.diff(times) > _SWITCH_TOL])]
     times[-1] = motion.duration
-    states = [motion.at_time(float(t)) for t in times]
+    accelerations = np.array([motion.at_time(float(t))[2] for t in times], dtype=float)  # (K + 1, n)
     # the pieces are integrated from the start state with ruckig's constant jerk per piece, so they join exactly;
-    # the few 1e-12 ruckig's states drift by are removed at the end by a quintic spread over the whole motion
+    # the few 1e-12 ruckig's states drift by are removed at the end by a quintic spread over the whole motion. The
+    # recurrence state_{k+1} = state_k + increment_k is a running sum (np.cumsum adds in order: the same numbers as
+    # a loop over the pieces, without a Python step per piece: ~1 ms less per 14-joint motion of ~60 pieces)
+    dt = np.diff(times)[:, None]
+    jerk = (accelerations[1:] - accelerations[:-1]) / dt
+    acc_all = np.cumsum(np.vstack([start[2][None], dt * jerk]), axis=0)  # at each piece's start, then the end
+    acc_k = acc_all[:-1]
+    v_all = np.cumsum(np.vstack([start[1][None], dt * (acc_k + dt * jerk / 2)]), axis=0)
+    v_k = v_all[:-1]
+    p_all = np.cumsum(np.vstack([start[0][None], dt * (v_k + dt * (acc_k / 2 + dt * jerk / 6))]), axis=0)
     coefficients = np.zeros((len(times) - 1, 6, n))
-    p, v, acc = start
-    for k, dt in enumerate(np.diff(times)):
-        jerk = (np.asarray(states[k + 1][2], dtype=float) - np.asarray(states[k][2], dtype=float)) / dt
-        coefficients[k, :4] = [p, v, acc / 2, jerk / 6]
-        p, v, acc = p + dt * (v + dt * (acc / 2 + dt * jerk / 6)), v + dt * (acc + dt * jerk / 2), acc + dt * jerk
+    for power, value in enumerate((p_all[:-1], v_k, acc_k / 2, jerk / 6)):
+        coefficients[:, power] = value
+    p, v, acc = p_all[-1], v_all[-1], acc_all[-1]
     total = float(times[-1] - times[0])
     e0, e1, e2 = goal[0] - p, goal[1] - v, goal[2] - acc
     top = [  # x³, x⁴, x⁵ coefficients of the correction: zero state at 0, (e0, e1, e2) at ``total``
