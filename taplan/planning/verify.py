@@ -464,11 +464,16 @@ def verify_trajectory(
         Q[:, index] = trajectory(t)
         return Q
 
+    padded = np.vstack([speeds, np.zeros((1, robot.nq))])  # reduceat's bounds may name one row past the pieces
+
     def rate(curve: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, travel: np.ndarray) -> np.ndarray:
         lo = np.maximum(np.searchsorted(times, t_a, side="right") - 1, 0)
-        hi = np.maximum(np.searchsorted(times, t_b, side="left"), lo + 1)
-        peak = np.array([speeds[i:j].max(axis=0) for i, j in zip(lo.tolist(), hi.tolist(), strict=True)])
-        return peak.reshape(len(t_a), robot.nq) @ travel.T
+        hi = np.maximum(np.searchsorted(times, t_b, side="left"), lo + 1)  # pieces lo .. hi - 1, hi <= len(speeds)
+        # the peak of each interval's pieces in one call: reduceat over the bounds (lo_0, hi_0, lo_1, hi_1, ...)
+        # reduces rows lo_i .. hi_i - 1 at the even places (lo < hi: never an empty range); the odd ones are unused
+        bounds = np.column_stack([lo, hi]).ravel()
+        peak = np.maximum.reduceat(padded, bounds, axis=0)[::2] if len(bounds) else np.zeros((0, robot.nq))
+        return peak @ travel.T
 
     start, end = float(times[0]), float(times[-1])
     grid = np.append(np.arange(start, end, LOOKAHEAD), end)
