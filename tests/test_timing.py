@@ -306,6 +306,20 @@ def test_position_range_of_high_degree_pieces_is_exact() -> None:
         assert np.all(samples.min(axis=0) - low < 1e-5) and np.all(high - samples.max(axis=0) < 1e-5)
 
 
+def _counted_solves(monkeypatch: pytest.MonkeyPatch, module: object) -> list[float]:
+    """The durations of every TOPP-RA solve ``module`` makes from now on, in order."""
+    solves: list[float] = []
+    profile = module.time_optimal_profile
+
+    def counted(*args: object, **kwargs: object) -> object:
+        out = profile(*args, **kwargs)
+        solves.append(out.duration)
+        return out
+
+    monkeypatch.setattr(module, "time_optimal_profile", counted)
+    return solves
+
+
 @pytest.mark.parametrize(("count", "seed"), [(12, 3), (25, 7), (30, 2)])
 def test_jerk_limited_skips_a_path_filter_that_cannot_beat_the_joint_method(
     arm_limits: taplan.JointLimits, count: int, seed: int, monkeypatch: pytest.MonkeyPatch
@@ -320,15 +334,7 @@ def test_jerk_limited_skips_a_path_filter_that_cannot_beat_the_joint_method(
     q = random_walk(arm_limits, count, seed)
     path, _, _ = as_path(q, arm_limits.size)
     factors, repairs = module.DEFAULT_WIDTH_FACTORS, module.DEFAULT_REPAIRS
-    solves: list[float] = []
-    profile = module.time_optimal_profile
-
-    def counted(*args: object, **kwargs: object) -> object:
-        out = profile(*args, **kwargs)
-        solves.append(out.duration)
-        return out
-
-    monkeypatch.setattr(module, "time_optimal_profile", counted)
+    solves = _counted_solves(monkeypatch, module)
     stopped = 0
     for max_deviation in (0.02, 0.01, 0.005):
         joint, _ = module._joint_filter(path, arm_limits, max_deviation, (16, 128), None)
@@ -380,15 +386,7 @@ def test_a_path_filter_that_loses_in_its_first_round_costs_one_toppra_solve(
     module = sys.modules["taplan.timing.jerk_limited"]
     path, _, _ = as_path(random_walk(arm_limits, 12, 3), arm_limits.size)
     factors, repairs = module.DEFAULT_WIDTH_FACTORS, module.DEFAULT_REPAIRS
-    solves: list[float] = []
-    profile = module.time_optimal_profile
-
-    def counted(*args: object, **kwargs: object) -> object:
-        out = profile(*args, **kwargs)
-        solves.append(out.duration)
-        return out
-
-    monkeypatch.setattr(module, "time_optimal_profile", counted)
+    solves = _counted_solves(monkeypatch, module)
     whole = module._path_filter(path, arm_limits, factors, 1.0, repairs, (4, 64), None)
     with_jerk, without = solves[0], solves[1]  # the first round's solve, then the reference TOPP-RA
     assert without < with_jerk and whole.topp_duration == without

@@ -10,7 +10,7 @@ import taplan
 from taplan.errors import InvalidInputError
 from taplan.limits import JointLimits
 from taplan.timing import jerk_limited, limit_usage, retime, straight_line
-from taplan.timing.straight import rest_to_rest_time
+from taplan.timing.straight import rest_to_rest_time, ruckig_input
 
 
 def _one_joint(v: float, a: float, j: float) -> JointLimits:
@@ -137,14 +137,8 @@ def test_state_to_state_pieces_follow_ruckigs_motion_on_both_arms(teleavatar) ->
         )
         goal = (teleavatar.home + rng.uniform(-0.5, 0.5, n), 0.2 * limits.velocity * rng.uniform(-1, 1, n), np.zeros(n))
         motion = state_to_state(start, goal, limits)
-        request = ruckig.InputParameter(n)
-        request.current_position, request.current_velocity, request.current_acceleration = (x.tolist() for x in start)
-        request.target_position, request.target_velocity, request.target_acceleration = (x.tolist() for x in goal)
-        request.max_velocity = limits.velocity.tolist()
-        request.max_acceleration = limits.acceleration.tolist()
-        request.max_jerk = limits.jerk.tolist()
         reference = ruckig.Trajectory(n)
-        ruckig.Ruckig(n).calculate(request, reference)
+        ruckig.Ruckig(n).calculate(ruckig_input(start, goal, limits), reference)
         assert motion.duration == pytest.approx(reference.duration, abs=1e-12)
         for t in np.linspace(0.0, motion.duration, 97):
             expected = reference.at_time(float(t))

@@ -122,17 +122,23 @@ def _ruckig_motion(
     return Trajectory.from_polynomials(*_ruckig_pieces(start, goal, limits, synchronization), limits.names)
 
 
-def _ruckig_pieces(
-    start: tuple[np.ndarray, ...], goal: tuple[np.ndarray, ...], limits: JointLimits, synchronization: object
-) -> tuple[np.ndarray, np.ndarray]:
-    n = len(limits.names)
-    generator = ruckig.Ruckig(n)
-    request = ruckig.InputParameter(n)
+def ruckig_input(start: tuple[np.ndarray, ...], goal: tuple[np.ndarray, ...], limits: JointLimits) -> object:
+    """ruckig's input from (position, velocity, acceleration) states and the limits' velocity, acceleration, jerk."""
+    request = ruckig.InputParameter(len(limits.names))
     request.current_position, request.current_velocity, request.current_acceleration = (x.tolist() for x in start)
     request.target_position, request.target_velocity, request.target_acceleration = (x.tolist() for x in goal)
     request.max_velocity = limits.velocity.tolist()
     request.max_acceleration = limits.acceleration.tolist()
     request.max_jerk = limits.jerk.tolist()
+    return request
+
+
+def _ruckig_pieces(
+    start: tuple[np.ndarray, ...], goal: tuple[np.ndarray, ...], limits: JointLimits, synchronization: object
+) -> tuple[np.ndarray, np.ndarray]:
+    n = len(limits.names)
+    generator = ruckig.Ruckig(n)
+    request = ruckig_input(start, goal, limits)
     request.synchronization = synchronization
     motion = ruckig.Trajectory(n)
     try:
