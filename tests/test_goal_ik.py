@@ -125,7 +125,7 @@ def test_a_solution_inside_the_margin_is_taken_only_with_a_certified_approach(ro
 
 
 def test_near_solutions_without_an_approach_are_skipped(robot: taplan.Robot, monkeypatch: pytest.MonkeyPatch) -> None:
-    near = [(0.1, 0, np.full(robot.nq, 1.0)), (0.2, 1, np.full(robot.nq, 2.0))]
+    near = [(0.1, np.full(robot.nq, 1.0)), (0.2, np.full(robot.nq, 2.0))]
     tried: list[float] = []
 
     def approach(world: Any, q: np.ndarray, *args: Any) -> Any:

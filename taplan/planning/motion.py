@@ -344,7 +344,7 @@ def _goal_ik(
     candidates = [start, robot.home] + [lower + rng.uniform(0, 1, robot.nq) * (upper - lower) for _ in range(seeds)]
     clear_best: np.ndarray | None = None
     clear_cost = np.inf
-    near: list[tuple[float, int, np.ndarray]] = []  # solutions clear of the floor only: (distance to start, k, q)
+    near: list[tuple[float, np.ndarray]] = []  # solutions clear of the floor only: (distance to start, q)
     approached: np.ndarray | None = None
     reason = "no IK solution within 1 mm / 0.01 rad"
     closest = (np.inf, np.inf)  # the best failed IK's position [m] and orientation [rad] error
@@ -371,14 +371,14 @@ def _goal_ik(
                 continue
             distance = float(np.linalg.norm(result.q - start))
             if d < margin:
-                near.append((distance, len(near), result.q))
+                near.append((distance, result.q))
                 continue
             if distance < clear_cost:
                 clear_best, clear_cost = result.q, distance
             if k == 0:
                 break  # warm start: the start seed's clear solution
         if clear_best is None:
-            approached = _approached(world, sorted(near, key=lambda c: c[:2]), start, limits, margin, floor)
+            approached = _approached(world, sorted(near, key=lambda c: c[0]), start, limits, margin, floor)
             if approached is None and near:
                 reason = f"no certified segment approaches the {len(near)} IK solutions inside the margin"
             near.clear()
@@ -399,7 +399,7 @@ def _goal_ik(
 
 def _approached(
     world: CollisionWorld,
-    near: list[tuple[float, int, np.ndarray]],
+    near: list[tuple[float, np.ndarray]],
     start: np.ndarray,
     limits: JointLimits,
     margin: float,
@@ -407,7 +407,7 @@ def _approached(
 ) -> np.ndarray | None:
     """The first of ``near`` (solutions inside the margin, closest to the start first) that a certified segment of
     the joints it moves approaches (the segment plan_motion will follow), or None."""
-    for _, _, q in near:
+    for _, q in near:
         active = np.flatnonzero(np.abs(q - start) > 1e-12)
         if approach_segment(world, q, "goal", active, limits.lower, limits.upper, margin, floor) is not None:
             return q
@@ -578,24 +578,14 @@ def _time_and_verify(
         if how.step is None:
             part = straight_line(path[0][active], path[1][active], scaled)
         else:
-            dense = _densify(path, how.step)[:, active]
-            if how.deviation > 0:
-                part = jerk_limited(
-                    dense,
-                    scaled,
-                    method="joint",
-                    max_deviation=how.deviation,
-                    points_per_segment=TIMING_POINTS,
-                    min_grid_segments=TIMING_MIN_GRID,
-                ).trajectory
-            else:
-                part = jerk_limited(
-                    dense,
-                    scaled,
-                    method="path",
-                    points_per_segment=TIMING_POINTS,
-                    min_grid_segments=TIMING_MIN_GRID,
-                ).trajectory
+            part = jerk_limited(  # deviation 0: the "path" method, through every waypoint
+                _densify(path, how.step)[:, active],
+                scaled,
+                method="joint" if how.deviation > 0 else "path",
+                max_deviation=how.deviation,
+                points_per_segment=TIMING_POINTS,
+                min_grid_segments=TIMING_MIN_GRID,
+            ).trajectory
         return _full_trajectory(part, names, active, q0)
 
     candidates: list[tuple[float, int, _Timing, Trajectory]] = []
@@ -604,16 +594,23 @@ def _time_and_verify(
     verified = 0
     options = _timings(len(path) == 2, max_deviation)
     took = 0.0  # [s] the longest timing so far: another one starts only if that much of the budget is left
-    for how in options[:1]:  # the fastest expected
+
+    def attempt(how: _Timing) -> Trajectory | None:
+        """``timed(how)``, its time counted; None (and why) when the timing fails."""
+        nonlocal why, took
         clock = time.perf_counter()
         try:
-            middle = timed(how)
+            return timed(how)
         except TimingError as exc:
             why = f"timing the path failed: {exc}"
-            continue
+            return None
         finally:
             took = max(took, time.perf_counter() - clock)
             times["timing"] += time.perf_counter() - clock
+
+    how = options[0]  # the fastest expected
+    middle = attempt(how)
+    if middle is not None:
         verified += 1
         clock = time.perf_counter()
         if how.step is None and certificate is not None and _on_certified_segment(world, middle, path, margin):
@@ -632,40 +629,25 @@ def _time_and_verify(
     last = len(options) - 1
 
     def last_resort() -> list[tuple[float, int, _Timing, Trajectory]]:
-        nonlocal why
         if time.perf_counter() + took >= deadline:
             return []
-        clock = time.perf_counter()
-        try:
-            middle = timed(options[last])
-        except TimingError as exc:
-            why = f"timing the path failed: {exc}"
-            return []
-        finally:
-            times["timing"] += time.perf_counter() - clock
-        return [(middle.duration, last, options[last], middle)]
+        middle = attempt(options[last])
+        return [] if middle is None else [(middle.duration, last, options[last], middle)]
 
     floor_of = {rank: _duration_floor(path, active, sub, how) for rank, how in enumerate(options[:last]) if rank}
     pending = sorted(floor_of, key=lambda rank: (floor_of[rank], rank))  # fallbacks not computed yet
 
     def shortest() -> list[tuple[float, int, _Timing, Trajectory]]:
         """The shortest fallback by (duration, rank), computing those whose floor does not rule them out."""
-        nonlocal why, took
         while pending and (not candidates or floor_of[pending[0]] <= candidates[0][0]):
             if time.perf_counter() + took >= deadline:
                 pending.clear()
                 break
             rank = pending.pop(0)
-            clock = time.perf_counter()
-            try:
-                middle = timed(options[rank])
+            middle = attempt(options[rank])
+            if middle is not None:
                 candidates.append((middle.duration, rank, options[rank], middle))
                 candidates.sort(key=lambda c: (c[0], c[1]))
-            except TimingError as exc:
-                why = f"timing the path failed: {exc}"
-            finally:
-                took = max(took, time.perf_counter() - clock)
-                times["timing"] += time.perf_counter() - clock
         return [candidates.pop(0)] if candidates else []
 
     queue = shortest() or last_resort()
