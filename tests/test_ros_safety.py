@@ -504,7 +504,9 @@ def test_sim_adjust_mode_as_the_guide_describes(robot, start_sim) -> None:
     during = [s for t, s in states if t > started + 0.1]
     assert 3 in during  # ADJUST
     assert during[-1] == 0  # it paused on its own once the routine was complete
-    np.testing.assert_allclose(measured[-1][1], home, atol=1e-6)
+    # [rad] the routine ends when the arm is within 1e-3 of the pose (taplan sim's completion test); how close the
+    # last motion step came depends on when the FSM check fell between them (6.6e-5 rad seen in CI)
+    np.testing.assert_allclose(measured[-1][1], home, atol=1e-3)
     arrived = min(t for t, q in measured if t > started and np.abs(q - home).max() < 1e-3)
     assert arrived - started > 0.6  # [s] 0.4 rad at the slow-start speed (0.5 rad/s) takes 0.8 s
     sim.process.terminate()
