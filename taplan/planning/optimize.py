@@ -74,6 +74,13 @@ STALL_WINDOW, STALL_RATIO, STALL_FLOOR = 2, 0.6, 0.2
 # within 97 ms (clutter #108), but cabinet #176 of problems(200, 1): its first QP (433 variables) took 307 ms and
 # cut 5.37 to 0.65 (to 12 %), clear after the next (CPU at load 2-3; issue 22, i22g notes)
 STALL_BUDGET = 0.12
+# ``give_up_stalled`` also stops after the first QP when the kept path's violation is still above FIRST_FLOOR [m] and
+# more than FIRST_RATIO of the straight line's: on 480 benchmark problems (problems(200, 0), (200, 1) and the hard
+# families (80, 1), the rules off for 15 QPs; issue 22, i22g's traces) the optimisations with such a first QP
+# (window, poles, shelf, cubby, cabinet: 0.50-1.00 of the start, 1.2-4.7 m left) either never got clear or got clear
+# after 190-450 ms into a plan the rules above already gave to the sampler; those that were kept cut the first
+# violation to at most 0.41 (cubby #38: 5.79 -> 1.68 m, clear after 78 ms) or below the floor
+FIRST_FLOOR, FIRST_RATIO = 1.0, 0.45
 BUDGET_RATIO = 0.25
 POINTS = 0.5  # its segments are certified at margin / 2 (every planner edge): evaluated points need no more
 
@@ -302,7 +309,9 @@ def _sequential_convex(
     violations: list[float] = []  # of the kept path after each QP
     while iterations < max_iterations and time.perf_counter() + longest < deadline:
         stuck = stall_since is not None and (
-            _stalled(violations) or _over_budget([initial, *violations], time.thread_time() - stall_since)
+            _stalled(violations)
+            or _first_step_short([initial, *violations])
+            or _over_budget([initial, *violations], time.thread_time() - stall_since)
         )
         if stuck:
             break
@@ -406,6 +415,15 @@ def _stalled(violations: list[float]) -> bool:
         return False
     now, before = violations[-1], violations[-1 - STALL_WINDOW]
     return now > STALL_FLOOR and now > STALL_RATIO * before
+
+
+def _first_step_short(violations: list[float]) -> bool:
+    """Whether an optimisation whose kept path's constraint violations [m] were ``violations`` (at its start, then
+    after its first QP) is deep in a collision its first QP did not get it far out of: still above ``FIRST_FLOOR``
+    and more than ``FIRST_RATIO`` of the start's."""
+    if len(violations) != 2:
+        return False
+    return violations[1] > FIRST_FLOOR and violations[1] > FIRST_RATIO * violations[0]
 
 
 def _over_budget(violations: list[float], spent: float) -> bool:
