@@ -65,35 +65,6 @@ def test_clearance_check_agrees_with_the_worlds_distances(robot: taplan.Robot, c
     assert check.checks == len(outcomes)
 
 
-@pytest.mark.parametrize("arms", [("right",), ("left", "right")])
-def test_the_broad_phase_gives_the_pair_loops_verdicts_on_near_misses(robot: taplan.Robot, arms: tuple) -> None:
-    """States whose tested pairs come within the clearance without touching (the bodies' boxes apart unless grown by
-    the margin), and states just beyond it: the broad phase (coal's AABB tree) answers as the loop over every active
-    pair and as the world's distances, for one arm and for both."""
-    scene = Scene()
-    scene.add("table", Box((0.6, 1.2, 0.04)), ([0.55, 0.0, -0.42], [0, 0, 0, 1]))
-    scene.add("ball", Sphere(0.08), ([0.45, 0.3, -0.1], [0, 0, 0, 1]))
-    scene.add("pole", Cylinder(0.01, 1.0), ([0.4, -0.3, -0.3], [0, 0, 0, 1]))
-    scene.attach("cup", Cylinder(0.035, 0.12), "right_tcp", ([0, 0, 0.06], [0, 0, 0, 1]))
-    world = CollisionWorld(robot, scene)
-    clearance = 0.01  # [m]
-    active = np.concatenate([robot.group(a).indices for a in arms])
-    check = ClearanceCheck(world, clearance, active)
-    tested = set(check.pairs)
-    rng = np.random.default_rng(7)
-    near, beyond = 0, 0
-    while near < 25 or beyond < 25:
-        q = robot.home.copy()
-        q[active] = _random(robot, rng)[active]
-        d = world.distances(q, jacobian=False)
-        lowest = min((x for p, x in zip(d.pairs, d.distance, strict=True) if p in tested), default=np.inf)
-        if not 1e-4 < lowest < 3 * clearance or abs(lowest - clearance) < 1e-6:
-            continue  # only near misses and states just beyond the clearance [m]
-        loop = not pin.computeCollisions(check.model, check.data, check.geometry, check.geometry_data, q, True)
-        assert check(q) == loop == (lowest >= clearance), lowest
-        near, beyond = near + (lowest < clearance), beyond + (lowest >= clearance)
-
-
 def test_clearance_check_of_the_moving_joints_tests_the_pairs_they_move(robot: taplan.Robot) -> None:
     """With the right arm's joints: every pair with a right-arm body (or what it carries) is tested, no pair of two
     bodies that stay put (the left arm against the table, the torso against the floor); the answers are those of

@@ -135,7 +135,7 @@ def test_field_clearance_agrees_with_the_world_at_many_configurations(robot: tap
 def test_sampler_check_covers_occupancy_and_matches_the_world(robot: taplan.Robot) -> None:
     world = CollisionWorld(robot, _perceived_like(robot))
     check = ClearanceCheck(world, 0.02)
-    assert check.geometry is not None and check.fields is not None  # compiled pairs + the occupancy test
+    assert check.ready and check.fields is not None  # compiled pairs + the occupancy test
     rng = np.random.default_rng(7)
     limits = robot.planning_limits
     Q = limits.lower + rng.uniform(0.05, 0.95, (300, robot.nq)) * (limits.upper - limits.lower)

@@ -141,6 +141,10 @@ class NativeFunction:
         entry.restype = ctypes.c_int
         self._entry = entry
         self.name = function.name()
+        # for compiled callers with buffers of their own (a numba loop): the C entry point
+        # ``int f(const double** arg, double** res, long long* iw, double* w, int mem)`` and its array sizes
+        self.address = int(ctypes.cast(entry, ctypes.c_void_p).value or 0)
+        self.sizes = (function.sz_arg(), function.sz_res(), function.sz_iw(), function.sz_w())
 
     def __call__(self) -> None:
         if self._entry(self._arg, self._res, self._iw, self._w_p, 0):

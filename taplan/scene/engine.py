@@ -38,7 +38,7 @@ from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Sphere
 if TYPE_CHECKING:
     from taplan.scene.world import CollisionWorld
 
-__all__ = ["BatchDistances", "DistanceEngine", "segment_box", "segment_cylinder"]
+__all__ = ["BatchDistances", "DistanceEngine", "end_point_kernel", "segment_box", "segment_cylinder"]
 
 SEARCH_POINTS, SEARCH_ROUNDS = 10, 16  # the cylinder search's bracket: (2 / 9)^16 < 1e-10 of the segment
 _TINY = 1e-18
@@ -708,6 +708,30 @@ KERNEL_LOCK = threading.Lock()
 def _native_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:
     """The compiled end point kernel of the world's bodies, checked against pinocchio, or None (numpy path).
     Cached per model and body set: worlds of one robot share it (calls are sequential and copy the outputs)."""
+    key = _kernel_key(world)
+    if key is None:
+        return None
+    if key not in _kernels:
+        _kernels[key] = _checked_kernel(world)
+    return _kernels[key]
+
+
+def end_point_kernel(world: CollisionWorld) -> Any:
+    """The compiled ``q -> body end points (6B)`` of the world's bodies without their Jacobians (a
+    :class:`~taplan.ik._native.NativeFunction`, ~0.2 µs of arithmetic where the kernel with Jacobians takes ~1 µs),
+    checked against pinocchio, or None (no C compiler, native code disabled). For callers that need positions only
+    and call the entry point with buffers of their own (:mod:`taplan.planning.clearance_kernel`)."""
+    key = _kernel_key(world)
+    if key is None:
+        return None
+    key = (*key, "ends")
+    if key not in _kernels:
+        _kernels[key] = _checked_kernel(world, jacobian=False)
+    found = _kernels[key]
+    return None if found is None else found[0]
+
+
+def _kernel_key(world: CollisionWorld) -> tuple[Any, ...] | None:
     try:
         from taplan.ik._native import native_enabled
     except ImportError:  # pragma: no cover - casadi is a dependency
@@ -726,12 +750,12 @@ def _native_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, 
         tuple(b.joint for b in world.bodies),
         ends.tobytes(),
     )
-    if key not in _kernels:
-        _kernels[key] = _checked_kernel(world)
-    return _kernels[key]
+    return key
 
 
-def _checked_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:
+def _checked_kernel(
+    world: CollisionWorld, jacobian: bool = True
+) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray] | None:
     import casadi as ca
 
     from taplan.ik._kernel_math import joint_axes
@@ -741,10 +765,10 @@ def _checked_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray,
     axes = joint_axes(model)
     if axes is None:
         return None
-    function = _build_kernel(world, axes, ca)
+    function = _build_kernel(world, axes, ca, jacobian)
     B, nv = len(world.bodies), model.nv
     q_in, e_out, j_out = np.zeros(model.nq), np.zeros(6 * B), np.zeros(6 * B * nv)
-    native = compile_function(function, [q_in], [e_out, j_out])
+    native = compile_function(function, [q_in], [e_out, j_out] if jacobian else [e_out])
     if native is None:
         return None
     # the generated chain must agree with pinocchio before it is trusted
@@ -757,14 +781,15 @@ def _checked_kernel(world: CollisionWorld) -> tuple[Any, np.ndarray, np.ndarray,
         q_in[:] = Q[n]
         native()
         assert rows is not None
-        got = j_out.reshape(nv, B, 2, 3).transpose(1, 2, 3, 0)
+        got = j_out.reshape(nv, B, 2, 3).transpose(1, 2, 3, 0) if jacobian else rows[n]
         if not (np.abs(e_out.reshape(B, 2, 3) - ends[n]).max() < 1e-9 and np.abs(got - rows[n]).max() < 1e-9):
             return None
     return native, q_in, e_out, j_out
 
 
-def _build_kernel(world: CollisionWorld, axes: list, ca: Any) -> Any:
-    """The CasADi function ``q -> (end points (6B), their Jacobians (6B, nv))`` of the world's bodies."""
+def _build_kernel(world: CollisionWorld, axes: list, ca: Any, jacobian: bool = True) -> Any:
+    """The CasADi function ``q -> (end points (6B), their Jacobians (6B, nv))`` of the world's bodies (without
+    ``jacobian``: ``q -> end points``)."""
     model = world.model
     q = ca.SX.sym("q", model.nq)
     rotations, origins = [ca.SX.eye(3)], [ca.SX.zeros(3)]
@@ -788,6 +813,8 @@ def _build_kernel(world: CollisionWorld, axes: list, ca: Any) -> Any:
         for local in (b.start, b.end):
             points.append((b.joint, origins[b.joint] + ca.mtimes(rotations[b.joint], ca.DM(np.asarray(local)))))
     E = ca.vertcat(*[p for _, p in points])
+    if not jacobian:
+        return ca.Function("taplan_body_ends", [q], [E])
     J = ca.SX.zeros(3 * len(points), model.nv)
     for r, (joint, p) in enumerate(points):
         if joint == 0:
