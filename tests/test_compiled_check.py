@@ -203,3 +203,21 @@ def test_without_native_code_the_kinematics_come_from_pinocchio(robot, suite, mo
 def test_a_clearance_must_be_a_finite_distance(robot, clearance) -> None:
     with pytest.raises(InvalidInputError, match="clearance"):
         ClearanceCheck(CollisionWorld(robot), clearance)
+
+
+def test_the_positions_only_kinematics_equal_the_engines(robot) -> None:
+    """``end_point_kernel`` (no Jacobians) gives the end points of the engine's kinematics (with them)."""
+    from taplan.scene.engine import end_point_kernel
+
+    world = CollisionWorld(robot)
+    kernel = end_point_kernel(world)
+    if kernel is None:
+        pytest.skip("no C compiler: native kernels are off")
+    assert end_point_kernel(CollisionWorld(robot)) is kernel  # shared by the worlds of one robot and body set
+    Q = np.random.default_rng(8).uniform(-2.0, 2.0, (20, robot.nq))
+    ends, _ = world.engine().segments(Q, jacobian=True)
+    q_in, e_out = kernel._keep[0][0], kernel._keep[1][0]
+    for q, expected in zip(Q, ends, strict=True):
+        q_in[:] = q
+        kernel()
+        assert np.abs(e_out.reshape(-1, 2, 3) - expected).max() < 1e-12  # [m]
