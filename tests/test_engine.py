@@ -1,5 +1,6 @@
 """taplan.scene.engine: batched distances equal to the coal reference (CollisionWorld with engine=False) to 1e-9 m,
-Jacobians equal to the reference and to finite differences, both kinematics paths, the world's batch entry points."""
+Jacobians equal to the reference and to finite differences, both kinematics paths, the world's batch entry points;
+the compiled pair loops equal the numpy engine they replaced (tests/engine_reference.py) on every benchmark family."""
 
 from __future__ import annotations
 
@@ -479,3 +480,80 @@ def test_the_compiler_lookup_follows_cc_and_path(monkeypatch: pytest.MonkeyPatch
     fake.chmod(0o755)
     monkeypatch.setenv("CC", "mycc")
     assert _native._compiler() == "mycc"
+
+
+@pytest.fixture(scope="module")
+def family_worlds(robot: taplan.Robot) -> list[tuple[CollisionWorld, np.ndarray]]:
+    """One world of each benchmark family (problems(26, 0): two of each; the first of each kept) with its
+    problem's start and goal and random configurations (many penetrate the obstacles)."""
+    from benchmarks._scenes import problems
+
+    seen: dict[str, tuple[CollisionWorld, np.ndarray]] = {}
+    for k, problem in enumerate(problems(26, 0)):
+        if problem.family in seen:
+            continue
+        ends = np.vstack([problem.start, problem.goal_q])
+        Q = np.vstack([ends, _configurations(robot, 24, 100 + k)])
+        seen[problem.family] = (CollisionWorld(robot, problem.scene), Q)
+    return list(seen.values())
+
+
+def test_compiled_pairs_equal_the_numpy_engine_on_every_benchmark_family(
+    robot: taplan.Robot, family_worlds: list[tuple[CollisionWorld, np.ndarray]]
+) -> None:
+    """The compiled loops (taplan.scene.engine_kernels) against the numpy engine they replaced
+    (tests/engine_reference.py), over every benchmark family's scene: the same pairs; distances, witness points,
+    normals and Jacobian rows to 1e-9 (bit for bit where numpy's BLAS adds as the kernels do); with and without
+    bounds, Jacobian cutoffs and obstacles; coal's penetration depths included; distances_of too."""
+    from engine_reference import NumpyEngine
+
+    settings = (
+        {},
+        {"bound_beyond": 0.05, "jacobian_within": 0.05},
+        {"jacobian": False, "bound_beyond": 0.1},
+        {"obstacles": False},
+        {"bound_beyond": -np.inf, "jacobian_within": 0.0},
+    )
+    penetrating = 0
+    for world, Q in family_worlds:
+        engine, reference = world.engine(), NumpyEngine(world)
+        for kwargs in settings:
+            got, want = engine.evaluate(Q, **kwargs), reference.evaluate(Q, **kwargs)
+            assert got.pairs == want.pairs
+            np.testing.assert_allclose(got.distance, want.distance, rtol=0, atol=DIST_TOL)
+            for name in ("point_a", "point_b", "normal"):
+                np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=0, atol=DIST_TOL)
+            if want.jacobian is None:
+                assert got.jacobian is None
+            else:
+                np.testing.assert_allclose(got.jacobian, want.jacobian, rtol=0, atol=JAC_TOL)
+            penetrating += int((want.distance < 0).sum())
+        columns = np.arange(len(engine.pair_columns()[0]))
+        for beyond in (np.inf, 0.05):
+            got_d = engine.distances_of(Q, columns, bound_beyond=beyond)
+            np.testing.assert_allclose(got_d, reference.distances_of(Q, columns, bound_beyond=beyond), atol=DIST_TOL)
+            # the same numbers as the batch's own
+            np.testing.assert_array_equal(got_d, engine.evaluate(Q, jacobian=False, bound_beyond=beyond).distance)
+    assert penetrating > 100
+
+
+def test_penetrating_axes_go_to_coal_in_both_engines(
+    robot: taplan.Robot, family_worlds: list[tuple[CollisionWorld, np.ndarray]]
+) -> None:
+    """The pairs whose axis enters a box or cylinder are coal's in the compiled engine as in the numpy one: the same
+    queries, and their witness points and Jacobian rows are coal's."""
+    from engine_reference import NumpyEngine
+
+    asked: dict[str, list[tuple[int, int]]] = {"compiled": [], "numpy": []}
+    for world, Q in family_worlds:
+        for name, engine in (("compiled", world.engine()), ("numpy", NumpyEngine(world))):
+            coal = engine._coal
+
+            def counted(ends: np.ndarray, body: int, item: int, name: str = name, coal: object = coal) -> object:
+                asked[name].append((body, item))
+                return coal(ends, body, item)  # type: ignore[operator]
+
+            engine._coal = counted  # type: ignore[method-assign]
+            engine.evaluate(Q)
+    assert len(asked["compiled"]) > 20
+    assert sorted(asked["compiled"]) == sorted(asked["numpy"])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from engine_reference import _point_segment
 
 from taplan.scene import engine
 from taplan.scene import pair_kernels as kernels
@@ -59,7 +60,7 @@ def test_segment_segment_equals_segment_parameters(seed: int) -> None:
 def test_point_segment_equals_the_broad_phase() -> None:
     e0, e1 = _segments(2)
     point = np.array([0.05, -0.1, 0.02])
-    want = engine._point_segment(point, e0, e1)
+    want = _point_segment(point, e0, e1)
     got = [kernels.point_segment(tuple(point.tolist()), a, b) for a, b in zip(_rows(e0), _rows(e1), strict=True)]
     np.testing.assert_allclose(got, want, rtol=0, atol=TOL)
 

@@ -4,7 +4,9 @@ obstacles, with witness points, normals and Jacobians, for N configurations in o
 Per configuration the robot is a set of capsules (:mod:`taplan.scene.robot_bodies`). Their end points and the end
 points' Jacobians come from one generated and compiled CasADi function of ``q`` (the approach of the IK kernel,
 :mod:`taplan.ik._native`: a few microseconds per configuration), or from pinocchio when no C compiler is available.
-Every distance is then computed in closed form with numpy over all configurations and pairs at once:
+Every distance is then computed in closed form, pair by pair in compiled loops over all configurations and pairs
+(:mod:`taplan.scene.engine_kernels`, calling the scalar closed forms of :mod:`taplan.scene.pair_kernels`; the numpy
+functions below are the same forms over arrays, for the world's attached objects):
 
 * robot capsule vs robot capsule, vs obstacle capsule and vs sphere: segment–segment (a sphere is a segment of zero
   length) minus the radii;
@@ -33,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pinocchio as pin
 
+from taplan.scene import engine_kernels as kernels
 from taplan.scene.shapes import Box, Capsule, Cylinder, HalfSpace, Sphere
 
 if TYPE_CHECKING:
@@ -96,7 +99,7 @@ class DistanceEngine:
         self.model = world.model
         bodies = world.bodies
         self.B = len(bodies)
-        self.radius = np.array([b.radius for b in bodies])
+        self.radius = np.array([b.radius for b in bodies], dtype=float)
         self.joint = np.array([b.joint for b in bodies], dtype=int)
         self.movers = world._movers
         self.self_i, self.self_j = world._self_index
@@ -121,11 +124,11 @@ class DistanceEngine:
         obstacles = [o for o in scene.obstacles.values() if isinstance(o.shape, _CLOSED)]
         self.obstacles = obstacles
         self.kind = np.array([_KINDS[type(o.shape)] for o in obstacles], dtype=int)
-        self.rotation = np.array([o.pose[:3, :3] for o in obstacles]).reshape(-1, 3, 3)
-        self.center = np.array([o.pose[:3, 3] for o in obstacles]).reshape(-1, 3)
-        self.bounding = np.array([o.shape.bounding_radius() for o in obstacles])
-        self.half = np.array([_half_extents(o.shape) for o in obstacles]).reshape(-1, 3)
-        self.obstacle_radius = np.array([getattr(o.shape, "radius", 0.0) for o in obstacles])
+        self.rotation = np.array([o.pose[:3, :3] for o in obstacles], dtype=float).reshape(-1, 3, 3)
+        self.center = np.array([o.pose[:3, 3] for o in obstacles], dtype=float).reshape(-1, 3)
+        self.bounding = np.array([o.shape.bounding_radius() for o in obstacles], dtype=float)
+        self.half = np.array([_half_extents(o.shape) for o in obstacles], dtype=float).reshape(-1, 3)
+        self.obstacle_radius = np.array([getattr(o.shape, "radius", 0.0) for o in obstacles], dtype=float)
         self.coal_geometry = [o.shape.to_coal() for o in obstacles]
         self.fields = [o for o in scene.obstacles.values() if _is_field(o.shape)]
         self._version = scene.version
@@ -160,31 +163,21 @@ class DistanceEngine:
         self._refresh()
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         E, JE = self.segments(Q, jacobian)
-        N = len(Q)
-        parts = [self._self_pairs(E, JE, jacobian_within)]
-        if obstacles and self.obstacles:
-            parts.append(self._obstacle_pairs(E, JE, bound_beyond, jacobian_within))
-        if obstacles and self.fields:
-            parts.append(self._field_pairs(E, JE, bound_beyond))
-        d = np.concatenate([p[0] for p in parts], axis=1)
-        pa = np.concatenate([p[1] for p in parts], axis=1)
-        pb = np.concatenate([p[2] for p in parts], axis=1)
-        n = np.concatenate([p[3] for p in parts], axis=1)
-        J = None
-        if jacobian:  # one array, each part's rows written into its columns (the parts' zeros and a concatenation
-            # of them were a third of a batch's cost)
-            assert JE is not None
-            J = np.zeros((N, d.shape[1], JE.shape[-1]))
-            offset = 0
-            for part in parts:
-                rows = part[4]
-                if isinstance(rows, tuple):  # (configuration, column, row) of the pairs that have one
-                    J[rows[0], offset + rows[1]] = rows[2]
-                else:
-                    J[:, offset : offset + part[0].shape[1]] = rows
-                offset += part[0].shape[1]
         names, travel, owner_a, owner_b = self._pair_columns(obstacles)
-        assert d.shape == (N, len(names))
+        N, P = len(Q), len(names)
+        d, pa, pb, n = np.empty((N, P)), np.empty((N, P, 3)), np.empty((N, P, 3)), np.empty((N, P, 3))
+        J = None if JE is None else np.zeros((N, P, JE.shape[-1]))
+        within = float(jacobian_within)
+        kernels.self_pairs(
+            E, _rows_in(JE), self.self_i, self.self_j, self.radius, within, J is not None, d, pa, pb, n, _rows_out(J)
+        )
+        if obstacles and self.obstacles:
+            self._obstacle_pairs(E, JE, float(bound_beyond), within, (d, pa, pb, n, J))
+        if obstacles and self.fields:
+            start = len(self.self_i) + len(self.obstacles) * len(self.movers)
+            for out, part in zip((d, pa, pb, n, J), self._field_pairs(E, JE, bound_beyond), strict=True):
+                if out is not None:
+                    out[:, start:] = part
         return BatchDistances(names, d, pa, pb, n, J, travel, owner_a, owner_b)
 
     def columns_of(self, pairs: tuple[tuple[str, str], ...]) -> np.ndarray | None:
@@ -200,9 +193,8 @@ class DistanceEngine:
     def distances_of(self, Q: np.ndarray, columns: np.ndarray, *, bound_beyond: float = math.inf) -> np.ndarray:
         """The distances (N, K) [m] of the pairs ``columns`` (K indices into :meth:`evaluate`'s pairs with
         obstacles) at the configurations ``Q`` (N, nq): the same numbers as ``evaluate(Q, jacobian=False,
-        bound_beyond=bound_beyond).distance[:, columns]`` (to rounding), without the other pairs, the witness points
-        or the normals. A certificate's later levels need a handful of pairs (those not yet certified on an
-        interval): the full batch cost ~0.1-0.3 ms per configuration, mostly pairs far from anything."""
+        bound_beyond=bound_beyond).distance[:, columns]``, without the other pairs, the witness points or the
+        normals. A certificate's later levels need a handful of pairs (those not yet certified on an interval)."""
         self._refresh()
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         columns = np.asarray(columns, dtype=int)
@@ -212,12 +204,8 @@ class DistanceEngine:
         out = np.empty((N, len(columns)))
         own = np.flatnonzero(columns < S)
         if own.size:
-            i, j = self.self_i[columns[own]], self.self_j[columns[own]]
-            a0, a1 = E[:, i, 0].reshape(-1, 3), E[:, i, 1].reshape(-1, 3)
-            b0, b1 = E[:, j, 0].reshape(-1, 3), E[:, j, 1].reshape(-1, 3)
-            u, v = segment_parameters(a0, a1, b0, b1)
-            gap = np.linalg.norm(a0 + u[:, None] * (a1 - a0) - (b0 + v[:, None] * (b1 - b0)), axis=1)
-            out[:, own] = gap.reshape(N, -1) - self.radius[i] - self.radius[j]
+            pairs = columns[own]
+            out[:, own] = kernels.self_distances(E, self.self_i[pairs], self.self_j[pairs], self.radius)
         solid = np.flatnonzero((columns >= S) & (columns < S + M * Bm))
         if solid.size:
             out[:, solid] = self._solid_distances(E, columns[solid] - S, bound_beyond)
@@ -241,28 +229,11 @@ class DistanceEngine:
         coal for a penetrating axis."""
         Bm = len(self.movers)
         m, body = flat // Bm, self.movers[flat % Bm]
-        N, K = len(E), len(flat)
-        R, c = self.rotation[m], self.center[m]  # (K, 3, 3), (K, 3)
-        e0 = ((E[:, body, 0] - c)[:, :, None, :] @ R[None])[:, :, 0].reshape(-1, 3)  # obstacle frames, (N K, 3)
-        e1 = ((E[:, body, 1] - c)[:, :, None, :] @ R[None])[:, :, 0].reshape(-1, 3)
-        kind, radius = np.tile(self.kind[m], N), np.tile(self.radius[body], N)
-        core = _point_segment(np.zeros(3), e0, e1)
-        centre_gap = np.linalg.norm(e0 + core[:, None] * (e1 - e0), axis=1)
-        d = centre_gap - radius - np.tile(self.bounding[m], N)
-        half = kind == _HALF
-        exact = np.flatnonzero((d <= bound_beyond) & ~half)
-        if exact.size:
-            size, rounding = np.tile(self.half[m], (N, 1)), np.tile(self.obstacle_radius[m], N)
-            _, d_k, *_, inside = solid_pairs(
-                kind[exact], size[exact], rounding[exact], e0[exact], e1[exact], radius[exact]
-            )
-            d[exact] = d_k
-            for row in exact[inside]:
-                n_, k_ = divmod(int(row), K)
-                d[row] = self._coal(E[n_, body[k_]], int(body[k_]), int(m[k_]))[0]
-        lower = np.minimum(e0[half, 2], e1[half, 2])  # a half-space: the lower end point's height
-        d[half] = lower - radius[half]
-        return d.reshape(N, K)
+        out = np.empty((len(E), len(flat)))
+        penetrating = kernels.solid_distances(E, body, m, self.radius, self._solids(), float(bound_beyond), out)
+        for n_, k_ in penetrating.tolist():
+            out[n_, k_] = self._coal(E[n_, body[k_]], int(body[k_]), int(m[k_]))[0]
+        return out
 
     def pair_columns(self) -> tuple[tuple[tuple[str, str], ...], np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`evaluate`'s pairs (with obstacles): names, travel rows (P, nv), owners of both members (P,)."""
@@ -288,95 +259,30 @@ class DistanceEngine:
         self._columns = {key: (tuple(names), travel, owner_a, owner_b)}
         return self._columns[key]
 
-    def _self_pairs(self, E: np.ndarray, JE: np.ndarray | None, within: float = math.inf) -> tuple[Any, ...]:
-        i, j = self.self_i, self.self_j
-        N, S = len(E), len(i)
-        a0, a1 = E[:, i, 0].reshape(-1, 3), E[:, i, 1].reshape(-1, 3)
-        b0, b1 = E[:, j, 0].reshape(-1, 3), E[:, j, 1].reshape(-1, 3)
-        s, t = segment_parameters(a0, a1, b0, b1)
-        pa, pb = a0 + s[:, None] * (a1 - a0), b0 + t[:, None] * (b1 - b0)
-        delta = pa - pb
-        norm = np.linalg.norm(delta, axis=1)
-        normal = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
-        ri, rj = np.tile(self.radius[i], N), np.tile(self.radius[j], N)
-        d = norm - ri - rj
-        pa, pb = pa - ri[:, None] * normal, pb + rj[:, None] * normal
-        rows = None
-        if JE is not None:  # (configuration, column, row) of the pairs within ``within``; the others' rows are 0
-            n_, k_ = np.nonzero(d.reshape(N, S) <= within)
-            flat = n_ * S + k_
-            nn = normal[flat]
-            rows = (n_, k_, _row(JE[n_, i[k_]], s[flat], nn) - _row(JE[n_, j[k_]], t[flat], nn))
-        shape = (N, S)
-        return d.reshape(shape), pa.reshape(*shape, 3), pb.reshape(*shape, 3), normal.reshape(*shape, 3), rows
+    def _solids(self) -> tuple[np.ndarray, ...]:
+        """The closed-form obstacles as the compiled loops take them: kind, rotation, centre, bounding radius, size,
+        rounding radius."""
+        return self.kind, self.rotation, self.center, self.bounding, self.half, self.obstacle_radius
 
     def _obstacle_pairs(
-        self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float, within: float = math.inf
-    ) -> tuple[Any, ...]:
-        """Moving bodies vs obstacles, obstacle-major (N, M, Bm) flattened to (N, M·Bm). The exact distances are
-        computed only for the pairs the broad phase keeps (in a cluttered scene with a cutoff, a tenth of them)."""
-        movers = self.movers
-        N, M, Bm = len(E), len(self.obstacles), len(movers)
-        # every pair in the obstacle's frame: (N, M, Bm, 3)
-        R, c = self.rotation, self.center
-        # x_local = Rᵀ (x − c), as rows: (x − c) R (batched matmul: einsum with broadcasting was half the cost)
-        e0 = (E[:, None, movers, 0] - c[None, :, None, :]) @ R[None]
-        e1 = (E[:, None, movers, 1] - c[None, :, None, :]) @ R[None]
-        shape = (N, M, Bm)
-        radius = np.broadcast_to(self.radius[movers], shape)
-        kind = np.broadcast_to(self.kind[None, :, None], shape)
-        # broad phase: the segment's distance to the obstacle's centre minus both bounding radii
-        s = _point_segment(np.zeros(3), e0, e1)  # witness parameter on the robot segment: nearest the centre
-        p = e0 + s[..., None] * (e1 - e0)  # segment witness, obstacle frame
-        centre_gap = np.linalg.norm(p, axis=-1)
-        d = centre_gap - radius - self.bounding[None, :, None]
-        far = (d > bound_beyond) & (kind != _HALF)
-        # a far pair reports that gap, witnessed by the segment's point nearest the centre and the centre
-        normal = np.where(centre_gap[..., None] > 1e-12, p / np.maximum(centre_gap, 1e-12)[..., None], [0.0, 0.0, 1.0])
-        pa_local = p - radius[..., None] * normal
-        near = np.zeros((*shape, 3))  # witness on the obstacle (its frame)
-        # the exact pairs, as flat arrays of those only
-        exact = np.nonzero(~far)
-        inside = np.zeros(0, dtype=int)
-        if exact[0].size:
-            x0, x1, kx, rx, mx = e0[exact], e1[exact], kind[exact], radius[exact], exact[1]
-            sx, nx_near = np.zeros(len(kx)), np.zeros((len(kx), 3))  # the core's nearest point
-            for code, solver in _SOLVERS.items():
-                pick = kx == code
-                if pick.any():
-                    sx[pick], nx_near[pick] = solver(x0[pick], x1[pick], self.half[mx[pick]])
-            px = x0 + sx[:, None] * (x1 - x0)
-            delta = px - nx_near
-            norm = np.linalg.norm(delta, axis=-1)
-            nx = np.where(norm[:, None] > 1e-12, delta / np.maximum(norm, 1e-12)[:, None], [0.0, 0.0, 1.0])
-            core_radius = self.obstacle_radius[mx]
-            rounded = (kx == _SPHERE) | (kx == _CAPSULE)
-            half = kx == _HALF
-            dx = np.where(half, px[:, 2] - rx, np.where(rounded, norm - core_radius, norm) - rx)
-            nx = np.where(half[:, None], [0.0, 0.0, 1.0], nx)
-            nx_near = np.where(rounded[:, None], nx_near + core_radius[:, None] * nx, nx_near)
-            nx_near = np.where(half[:, None], px * [1.0, 1.0, 0.0], nx_near)
-            d[exact], s[exact], normal[exact] = dx, sx, nx
-            pa_local[exact], near[exact] = px - rx[:, None] * nx, nx_near
-            # the axis touches or enters a box or cylinder: penetration depth from coal (its EPA), not a point
-            # distance (and a capsule inside a cylinder: coal's depth there, so that both paths agree to 1e-9 m)
-            inside = np.flatnonzero(((norm <= 1e-12) & ~rounded & ~half) | ((kx == _CYLINDER) & (dx < 0.0)))
-        # back to the root frame
-        Rt = R.transpose(0, 2, 1)[None]  # rows back to the root frame: x = x_local Rᵀ + c
-        pa = pa_local @ Rt + c[None, :, None]
-        pb = near @ Rt + c[None, :, None]  # a far pair's: the centre
-        normal = normal @ Rt
-        for k in inside.tolist():
-            n_, m_, b_ = exact[0][k], exact[1][k], exact[2][k]
-            d[n_, m_, b_], pa[n_, m_, b_], pb[n_, m_, b_], normal[n_, m_, b_], s[n_, m_, b_] = self._coal(
-                E[n_, movers[b_]], movers[b_], m_
-            )
-        rows = None
-        if JE is not None:  # (configuration, column, row) of the pairs within ``within``; the others' rows are 0
-            n_, m_, b_ = np.nonzero(d <= within)
-            rows = (n_, m_ * Bm + b_, _row(JE[n_, movers[b_]], s[n_, m_, b_], normal[n_, m_, b_]))
-        flat = (N, M * Bm)
-        return d.reshape(flat), pa.reshape(*flat, 3), pb.reshape(*flat, 3), normal.reshape(*flat, 3), rows
+        self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float, within: float, out: tuple[Any, ...]
+    ) -> None:
+        """Moving bodies vs closed-form obstacles into their columns of ``out`` (distance, witnesses, normal,
+        Jacobian or None), obstacle-major ``S + m·Bm + b``: the compiled loop, then coal for the pairs whose axis
+        touches or enters a box or cylinder (or a capsule inside a cylinder: coal's depth there, so that both paths
+        agree to 1e-9 m)."""
+        d, pa, pb, normal, J = out
+        S, movers = len(self.self_i), self.movers
+        penetrating = kernels.obstacle_pairs(
+            E, _rows_in(JE), movers, self.radius, self._solids(), bound_beyond, within, J is not None, S,
+            d, pa, pb, normal, _rows_out(J),
+        )  # fmt: skip
+        for n_, m_, b_ in penetrating.tolist():
+            k = S + m_ * len(movers) + b_
+            body = int(movers[b_])
+            d[n_, k], pa[n_, k], pb[n_, k], normal[n_, k], s = self._coal(E[n_, body], body, m_)
+            if J is not None and d[n_, k] <= within:
+                J[n_, k] = _row(JE[n_, body], np.float64(s), normal[n_, k])
 
     def _field_pairs(self, E: np.ndarray, JE: np.ndarray | None, bound_beyond: float) -> tuple[np.ndarray, ...]:
         """Moving bodies vs obstacles that answer capsule distances themselves (occupancy voxels): one call per
@@ -460,12 +366,18 @@ def _half_extents(shape: Any) -> tuple[float, float, float]:
     return (0.0, 0.0, 0.0)
 
 
-def _point_segment(point: np.ndarray, e0: np.ndarray, e1: np.ndarray) -> np.ndarray:
-    """Parameter in [0, 1] of the point of each segment nearest ``point``."""
-    axis = e1 - e0
-    length2 = (axis * axis).sum(axis=-1)
-    t = ((point - e0) * axis).sum(axis=-1) / np.maximum(length2, _TINY)
-    return np.clip(np.where(length2 < _TINY, 0.0, t), 0.0, 1.0)
+# stand-ins for the Jacobian arrays of a batch without them (the compiled loops take arrays of fixed rank); the
+# end points' rows are a strided view (the kernel's transposed output), so is this one: one compilation for both
+_NO_ROWS = np.zeros((1, 1, 2, 3, 2))[..., ::2]
+_NO_JACOBIAN = np.zeros((1, 1, 1))
+
+
+def _rows_in(JE: np.ndarray | None) -> np.ndarray:
+    return _NO_ROWS if JE is None else JE
+
+
+def _rows_out(J: np.ndarray | None) -> np.ndarray:
+    return _NO_JACOBIAN if J is None else J
 
 
 def segment_parameters(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, ...]:
