@@ -289,6 +289,24 @@ def test_an_optimisation_whose_first_qp_stays_deep_gives_up_after_it(robot, monk
     _assert_a_converging_optimisation_is_left_alone(robot)
 
 
+def test_a_first_qp_too_large_for_the_dense_solver_is_not_started_before_the_sampler(robot, monkeypatch) -> None:
+    """Before the sampler, an optimisation whose first QP has more than LARGE_QP variables (a collision deep enough to
+    violate hundreds of rows) gives up without solving it; on its own the optimiser solves it (osqp) and goes on."""
+    from benchmarks._scenes import problems
+
+    limits = robot.planning_limits
+    solves = _solves(monkeypatch)
+    [stuck] = problems(1, 0, families=("table",))
+    world = CollisionWorld(robot, stuck.scene)
+    seed = np.array([stuck.start, stuck.goal_q])
+    active = np.flatnonzero(np.abs(stuck.goal_q - stuck.start) > 1e-12)
+    monkeypatch.setattr(optimize_module, "LARGE_QP", 100)  # its first QP: 172 variables
+    assert optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True) is None
+    assert not solves
+    optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, max_iterations=3)
+    assert len(solves) == 3
+
+
 def test_rows_no_point_of_the_trust_box_can_violate_are_left_out_with_the_same_optimum() -> None:
     """_without_redundant_rows drops only hard rows that hold everywhere in the box (checked at its corners along
     each row, the worst case, and at random points), keeps every soft row (re-indexed to the same rows), and the

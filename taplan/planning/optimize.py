@@ -81,6 +81,10 @@ STALL_BUDGET = 0.12
 # after 190-450 ms into a plan the rules above already gave to the sampler; those that were kept cut the first
 # violation to at most 0.41 (cubby #38: 5.79 -> 1.68 m, clear after 78 ms) or below the floor
 FIRST_FLOOR, FIRST_RATIO = 1.0, 0.45
+# ``give_up_stalled`` does not start with a first QP of more than LARGE_QP variables (one slack per violated row: a
+# collision deep enough to violate 200-470 rows): on those 480 problems three optimisations had one (window #148 and
+# #174 of problems(200, 0), cubby #142 of problems(200, 1): 454-520 variables, osqp 120-200 ms for the first QP);
+# none got clear but #148, after 450 ms, into a plan 35 % longer than the sampler's
 BUDGET_RATIO = 0.25
 POINTS = 0.5  # its segments are certified at margin / 2 (every planner edge): evaluated points need no more
 
@@ -315,7 +319,6 @@ def _sequential_convex(
         )
         if stuck:
             break
-        iterations += 1
         begin = time.perf_counter()
         G_x, h = _linearised(problem, evaluations, x, target)
         # a seed waypoint inside the inset keeps its place as a bound: the box stays non-empty
@@ -329,6 +332,9 @@ def _sequential_convex(
         E[soft, np.arange(s)] = -1.0
         q = np.concatenate([problem.q, np.full(s, mu)])
         backend = solver if solver != "auto" else ("daqp" if problem.N + s <= LARGE_QP else "osqp")
+        if stall_since is not None and not iterations and problem.N + s > LARGE_QP:
+            break  # a first QP only osqp takes: the deepest collisions (see FIRST_FLOOR)
+        iterations += 1
         if backend in DENSE_SOLVERS:
             P = np.zeros((problem.N + s, problem.N + s))
             P[: problem.N, : problem.N] = problem.P_dense
