@@ -172,7 +172,9 @@ def _split(world: CollisionWorld) -> _Pairs:
     index = {name: k for k, name in enumerate(solids)}
     fields = {name for name, o in world.scene.obstacles.items() if hasattr(o.shape, "capsule_distances")}
     pairs = [
-        (a, b) for a, b in world.distances(robot.home, jacobian=False).pairs if a not in fields and b not in fields
+        (a, b)
+        for a, b in world.distances(robot.home, jacobian=False, bound_beyond=-math.inf).pairs  # names only
+        if a not in fields and b not in fields
     ]
     P = len(pairs)
     self_a, self_b, body, obstacle = (np.full(P, -1, dtype=np.int64) for _ in range(4))
