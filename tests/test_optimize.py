@@ -341,3 +341,23 @@ def test_rows_no_point_of_the_trust_box_can_violate_are_left_out_with_the_same_o
         return qpsolvers.solve_qp(P, q, np.hstack([rows, E]), bounds, lb=lb, ub=ub, solver="daqp")
 
     np.testing.assert_allclose(solve(G_kept, h_kept, soft_kept), solve(G, h, soft), rtol=0, atol=1e-9)
+
+
+def test_osqp_gets_its_polishing_setting_under_its_own_name(robot, world) -> None:
+    """osqp 1.x renamed ``polish`` to ``polishing`` (the old name warns): the optimiser and the IK's osqp backend use
+    the installed version's name, and an optimisation solved by osqp raises no deprecation warning."""
+    import warnings
+    from importlib.metadata import version
+
+    from taplan._osqp import polish_setting
+    from taplan.ik.solvers import get_solver
+
+    major = int(version("osqp").split(".")[0])
+    assert polish_setting() == ("polishing" if major >= 1 else "polish")
+    assert get_solver("osqp").options[polish_setting()] is True
+    limits = robot.planning_limits
+    start, goal = robot.home.copy(), robot.home.copy()
+    goal[:7] += 0.4  # [rad]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        optimize_path(world, np.array([start, goal]), np.arange(7), limits.lower, limits.upper, MARGIN, solver="osqp")

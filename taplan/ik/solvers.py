@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from taplan._osqp import polish_setting
 from taplan.errors import SolverError, UnknownNameError
 from taplan.ik.problem import Problem
 
@@ -288,9 +289,8 @@ class QPSolversSolver(QPSolver):
 
     def __init__(self, name: str, **options: Any) -> None:
         self.name = name
-        defaults: dict[str, Any] = {"osqp": {"eps_abs": 1e-9, "eps_rel": 0.0, "max_iter": 20000, "polish": True}}.get(
-            name, {}
-        )
+        osqp = {"eps_abs": 1e-9, "eps_rel": 0.0, "max_iter": 20000, polish_setting(): True}
+        defaults: dict[str, Any] = {"osqp": osqp}.get(name, {})
         self.options = {**defaults, **options}
 
     def solve(self, problem: Problem) -> np.ndarray:

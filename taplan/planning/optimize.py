@@ -27,6 +27,7 @@ import numpy as np
 import qpsolvers
 import scipy.sparse as sp
 
+from taplan._osqp import polish_setting
 from taplan.errors import InvalidInputError
 from taplan.planning.verify import KnownDistances, check_segments
 from taplan.scene.world import CollisionWorld
@@ -53,7 +54,7 @@ DENSE_SOLVERS = ("daqp", "quadprog", "proxqp")  # given dense matrices; others g
 # (200, 1) and the hard (80, 1) (every stage and duration to 1e-6 s), cabinet #176 of (200, 1) 279 -> 103 ms of
 # optimiser CPU, hard cabinet #66 232 -> 139, shelf #54 of (200, 0) 169 -> 135
 LARGE_QP = 450
-OSQP_SETTINGS = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polish": True, "max_iter": 20000, "raise_error": False}
+OSQP_SETTINGS = {"eps_abs": 1e-6, "eps_rel": 1e-6, polish_setting(): True, "max_iter": 20000, "raise_error": False}
 REFINEMENTS = 4  # segment splits after a failed certification
 # ``give_up_stalled``: after STALL_WINDOW + 1 QPs, an optimisation whose constraint violation (Σ of the distances
 # short of the target [m]) is above STALL_FLOOR and more than STALL_RATIO of what it was STALL_WINDOW QPs before
