@@ -20,6 +20,7 @@ LAYERS = (
         "errors",
         "_validation",
         "_threads",
+        "_osqp",
         "limits",
         "trajectory",
         "io",
