@@ -55,6 +55,7 @@ from taplan.errors import CollisionError, InvalidInputError, PlanningError, Tapl
 from taplan.limits import JointLimits
 from taplan.planning.compiled_check import ClearanceCheck
 from taplan.planning.ends import DEFAULT_FLOOR, Approach, approach_segment
+from taplan.planning.kernels_ready import load_compiled_kernels
 from taplan.planning.optimize import optimize_path, resample
 from taplan.planning.rrt import (
     SMOOTH_SPACING_SHARE,
@@ -786,6 +787,8 @@ def plan_motion(
         max_time: Time budget of the whole call (goal IK, path, smoothing, timing, verification) [s]; the call
             returns or raises within ``max_time + BUDGET_TOLERANCE`` (one indivisible step: an IK solve, a QP, a
             timing). A sampled path whose smoothing does not fit is returned unsmoothed (``report.notes`` says so).
+            The first call of a process loads the compiled kernels before the budget starts (~0.2 s; once after
+            installing, a few seconds of compilation: :mod:`~taplan.planning.kernels_ready`).
         stages: Path stages to try, in this order: any of ``"straight"``, ``"optimization"``, ``"rrt-connect"``.
         ik_seeds: Random seeds of the goal IK beyond the start and home.
         seed: Seed of every random choice (reproducible plans).
@@ -798,6 +801,7 @@ def plan_motion(
         CollisionError: start or goal inside the floor (names the pair and the distance in mm).
         PlanningError: unreachable goal pose, no path or no verified timing within ``max_time``.
     """
+    load_compiled_kernels(robot)  # their first call in a process: outside the budget (taplan.planning.kernels_ready)
     begin = time.perf_counter()
     times = dict.fromkeys(("validate", "goal_ik", "straight", "optimize", "sample", "smooth", "timing", "verify"), 0.0)
     limits = robot.planning_limits if limits is None else limits
