@@ -88,19 +88,14 @@ def test_a_rejected_step_shrinks_the_trust_region_below_it() -> None:
 
 
 def test_skipping_the_contained_trust_regions_gives_the_same_path(robot, monkeypatch) -> None:
-    from benchmarks._scenes import problems
-
-    [problem] = problems(1, 3, families=("cubby",))  # two arms; one rejected step is inside the halved region
-    world = CollisionWorld(robot, problem.scene)
-    start, goal = problem.start, problem.goal_q
-    active = np.flatnonzero(np.abs(goal - start) > 1e-12)
+    world, seed, active = _straight_problem(robot, 1, 3, ("cubby",))  # two arms; a rejected step inside the halved
     limits = robot.planning_limits
     solves = _solves(monkeypatch)
-    skipping = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    skipping = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
     skipped_solves = len(solves)
     solves.clear()
     monkeypatch.setattr(optimize_module, "_shrunk_trust", lambda trust, step: trust / 2)
-    halving = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    halving = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
     assert skipping is not None and halving is not None
     np.testing.assert_allclose(skipping.path, halving.path, rtol=0, atol=1e-9)  # [rad]
     assert skipped_solves < len(solves)  # the same path with fewer QPs
@@ -114,12 +109,7 @@ def _dense_clearance(world: CollisionWorld, path: np.ndarray, per_segment: int =
 
 
 def test_slacks_only_for_the_violated_rows_give_the_same_path_with_smaller_qps(robot, monkeypatch) -> None:
-    from benchmarks._scenes import problems
-
-    [problem] = problems(1, 3, families=("cubby",))  # two arms, starts deep in collision, then keeps the target
-    world = CollisionWorld(robot, problem.scene)
-    start, goal = problem.start, problem.goal_q
-    active = np.flatnonzero(np.abs(goal - start) > 1e-12)
+    world, seed, active = _straight_problem(robot, 1, 3, ("cubby",))  # deep in collision, then keeps the target
     limits = robot.planning_limits
     sizes: list[int] = []
     original_solve = optimize_module.qpsolvers.solve_qp
@@ -129,11 +119,11 @@ def test_slacks_only_for_the_violated_rows_give_the_same_path_with_smaller_qps(r
         return original_solve(P, *args, **kwargs)
 
     monkeypatch.setattr(optimize_module.qpsolvers, "solve_qp", sized)
-    soft = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    soft = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
     soft_sizes = list(sizes)
     sizes.clear()
     monkeypatch.setattr(optimize_module, "_soft_rows", lambda G_x, h, x: np.arange(G_x.shape[0]))  # every row
-    every = optimize_path(world, np.array([start, goal]), active, limits.lower, limits.upper, MARGIN)
+    every = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
     assert soft is not None and every is not None
     length = [float(np.linalg.norm(np.diff(r.path, axis=0), axis=1).sum()) for r in (soft, every)]
     assert abs(length[0] - length[1]) <= 0.01 * length[1]  # [rad] the same path to 1 % of its length
@@ -166,6 +156,22 @@ def test_stalled_is_a_violation_that_stops_falling() -> None:
         assert not any(_stalled(converging[:k]) for k in range(1, len(converging) + 1))
 
 
+def _straight_problem(
+    robot: taplan.Robot, count: int, seed: int, families: tuple[str, ...], index: int = 0
+) -> tuple[CollisionWorld, np.ndarray, np.ndarray]:
+    """Problem ``index`` of the benchmark's ``problems(count, seed, families)``: its world, its straight line (start,
+    goal configuration) as the optimiser's seed path and the joints that move."""
+    from benchmarks._scenes import problems
+
+    problem = problems(count, seed, families=families)[index]
+    seed_path = np.array([problem.start, problem.goal_q])
+    return (
+        CollisionWorld(robot, problem.scene),
+        seed_path,
+        np.flatnonzero(np.abs(problem.goal_q - problem.start) > 1e-12),
+    )
+
+
 def _solves(monkeypatch) -> list[int]:
     solves: list[int] = []
     original_solve = optimize_module.qpsolvers.solve_qp
@@ -179,15 +185,13 @@ def _solves(monkeypatch) -> list[int]:
 
 
 def test_giving_up_a_stalled_optimisation_stops_early_and_leaves_a_converging_one_alone(robot, monkeypatch) -> None:
-    from benchmarks._scenes import problems
     from taplan.planning.optimize import STALL_WINDOW
 
     limits = robot.planning_limits
     solves = _solves(monkeypatch)
-    [stuck] = problems(1, 0, families=("table",))  # the straight line's optimisation stays in the table
-    world = CollisionWorld(robot, stuck.scene)
-    seed = np.array([stuck.start, stuck.goal_q])
-    active = np.flatnonzero(np.abs(stuck.goal_q - stuck.start) > 1e-12)
+    world, seed, active = _straight_problem(
+        robot, 1, 0, ("table",)
+    )  # the straight line's optimisation stays in the table
     given_up = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True)
     assert given_up is None and len(solves) <= STALL_WINDOW + 3
     solves.clear()
@@ -199,13 +203,9 @@ def test_giving_up_a_stalled_optimisation_stops_early_and_leaves_a_converging_on
 def _assert_a_converging_optimisation_is_left_alone(robot: taplan.Robot) -> tuple[CollisionWorld, object]:
     """A cubby problem deep in collision at first, then clear: the give-up rules return the same path, bit for bit,
     as no rule. Returns the world and the optimisation."""
-    from benchmarks._scenes import problems
 
     limits = robot.planning_limits
-    [clear] = problems(1, 3, families=("cubby",))
-    world = CollisionWorld(robot, clear.scene)
-    seed = np.array([clear.start, clear.goal_q])
-    active = np.flatnonzero(np.abs(clear.goal_q - clear.start) > 1e-12)
+    world, seed, active = _straight_problem(robot, 1, 3, ("cubby",))
     kept = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True)
     plain = optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN)
     assert kept is not None and plain is not None
@@ -233,14 +233,10 @@ def test_an_optimisation_over_the_budget_gives_up_after_the_qp_that_crossed_it(r
     """With no budget the stuck table problem gives up after its first QP (1.86 -> 0.73 m: above the floor and more
     than a quarter), not after the stall rule's 3 or more; a converging optimisation whose first QP takes it below
     the floor returns the same path, bit for bit, as without any give-up rule."""
-    from benchmarks._scenes import problems
 
     limits = robot.planning_limits
     solves = _solves(monkeypatch)
-    [stuck] = problems(1, 0, families=("table",))
-    world = CollisionWorld(robot, stuck.scene)
-    seed = np.array([stuck.start, stuck.goal_q])
-    active = np.flatnonzero(np.abs(stuck.goal_q - stuck.start) > 1e-12)
+    world, seed, active = _straight_problem(robot, 1, 0, ("table",))
     assert optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True) is None
     assert len(solves) > 1  # the stall rule alone: 3 QPs or more
     monkeypatch.setattr(optimize_module, "STALL_BUDGET", 0.0)  # [s]
@@ -270,15 +266,11 @@ def test_first_step_short_is_a_deep_collision_its_first_qp_barely_cut() -> None:
 def test_an_optimisation_whose_first_qp_stays_deep_gives_up_after_it(robot, monkeypatch) -> None:
     """A window problem whose first QP cuts 4.42 m of violation to 2.25 only: given up after that QP, where the other
     rules (without the CPU budget, which depends on the machine) let it run on; a converging one is left alone."""
-    from benchmarks._scenes import problems
 
     limits = robot.planning_limits
     solves = _solves(monkeypatch)
     monkeypatch.setattr(optimize_module, "STALL_BUDGET", np.inf)  # [s]
-    deep = problems(6, 0, families=("window", "poles"))[2]
-    world = CollisionWorld(robot, deep.scene)
-    seed = np.array([deep.start, deep.goal_q])
-    active = np.flatnonzero(np.abs(deep.goal_q - deep.start) > 1e-12)
+    world, seed, active = _straight_problem(robot, 6, 0, ("window", "poles"), 2)
     assert optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True) is None
     assert len(solves) == 1
     monkeypatch.setattr(optimize_module, "FIRST_FLOOR", np.inf)  # [m]
@@ -292,14 +284,10 @@ def test_an_optimisation_whose_first_qp_stays_deep_gives_up_after_it(robot, monk
 def test_a_first_qp_too_large_for_the_dense_solver_is_not_started_before_the_sampler(robot, monkeypatch) -> None:
     """Before the sampler, an optimisation whose first QP has more than LARGE_QP variables (a collision deep enough to
     violate hundreds of rows) gives up without solving it; on its own the optimiser solves it (osqp) and goes on."""
-    from benchmarks._scenes import problems
 
     limits = robot.planning_limits
     solves = _solves(monkeypatch)
-    [stuck] = problems(1, 0, families=("table",))
-    world = CollisionWorld(robot, stuck.scene)
-    seed = np.array([stuck.start, stuck.goal_q])
-    active = np.flatnonzero(np.abs(stuck.goal_q - stuck.start) > 1e-12)
+    world, seed, active = _straight_problem(robot, 1, 0, ("table",))
     monkeypatch.setattr(optimize_module, "LARGE_QP", 100)  # its first QP: 172 variables
     assert optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True) is None
     assert not solves
