@@ -282,13 +282,13 @@ def test_an_optimisation_whose_first_qp_stays_deep_gives_up_after_it(robot, monk
 
 
 def test_a_first_qp_too_large_for_the_dense_solver_is_not_started_before_the_sampler(robot, monkeypatch) -> None:
-    """Before the sampler, an optimisation whose first QP has more than LARGE_QP variables (a collision deep enough to
-    violate hundreds of rows) gives up without solving it; on its own the optimiser solves it (osqp) and goes on."""
+    """Before the sampler, an optimisation whose first QP has more than FIRST_QP_LIMIT variables (a collision deep
+    enough to violate hundreds of rows) gives up without solving it; on its own the optimiser solves it and goes on."""
 
     limits = robot.planning_limits
     solves = _solves(monkeypatch)
     world, seed, active = _straight_problem(robot, 1, 0, ("table",))
-    monkeypatch.setattr(optimize_module, "LARGE_QP", 100)  # its first QP: 172 variables
+    monkeypatch.setattr(optimize_module, "FIRST_QP_LIMIT", 100)  # its first QP: 172 variables
     assert optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, give_up_stalled=True) is None
     assert not solves
     optimize_path(world, seed, active, limits.lower, limits.upper, MARGIN, max_iterations=3)

@@ -75,6 +75,7 @@ STALL_WINDOW, STALL_RATIO, STALL_FLOOR = 2, 0.6, 0.2
 # within 97 ms (clutter #108), but cabinet #176 of problems(200, 1): its first QP (433 variables) took 307 ms and
 # cut 5.37 to 0.65 (to 12 %), clear after the next (CPU at load 2-3; issue 22, i22g notes)
 STALL_BUDGET = 0.12
+BUDGET_RATIO = 0.25
 # ``give_up_stalled`` also stops after the first QP when the kept path's violation is still above FIRST_FLOOR [m] and
 # more than FIRST_RATIO of the straight line's: on 480 benchmark problems (problems(200, 0), (200, 1) and the hard
 # families (80, 1), the rules off for 15 QPs; issue 22, i22g's traces) the optimisations with such a first QP
@@ -82,11 +83,12 @@ STALL_BUDGET = 0.12
 # after 190-450 ms into a plan the rules above already gave to the sampler; those that were kept cut the first
 # violation to at most 0.41 (cubby #38: 5.79 -> 1.68 m, clear after 78 ms) or below the floor
 FIRST_FLOOR, FIRST_RATIO = 1.0, 0.45
-# ``give_up_stalled`` does not start with a first QP of more than LARGE_QP variables (one slack per violated row: a
-# collision deep enough to violate 200-470 rows): on those 480 problems three optimisations had one (window #148 and
-# #174 of problems(200, 0), cubby #142 of problems(200, 1): 454-520 variables, osqp 120-200 ms for the first QP);
-# none got clear but #148, after 450 ms, into a plan 35 % longer than the sampler's
-BUDGET_RATIO = 0.25
+# ``give_up_stalled`` does not start with a first QP of more than FIRST_QP_LIMIT variables (one slack per violated
+# row: a collision deep enough to violate 200-470 rows), which only osqp takes (LARGE_QP): on those 480 problems
+# three optimisations had one (window #148 and #174 of problems(200, 0), cubby #142 of problems(200, 1): 454-520
+# variables, osqp 120-200 ms for the first QP); none got clear but #148, after 450 ms, into a plan 35 % longer than
+# the sampler's
+FIRST_QP_LIMIT = LARGE_QP  # [QP variables]
 POINTS = 0.5  # its segments are certified at margin / 2 (every planner edge): evaluated points need no more
 
 
@@ -333,8 +335,8 @@ def _sequential_convex(
         E[soft, np.arange(s)] = -1.0
         q = np.concatenate([problem.q, np.full(s, mu)])
         backend = solver if solver != "auto" else ("daqp" if problem.N + s <= LARGE_QP else "osqp")
-        if stall_since is not None and not iterations and problem.N + s > LARGE_QP:
-            break  # a first QP only osqp takes: the deepest collisions (see FIRST_FLOOR)
+        if stall_since is not None and not iterations and problem.N + s > FIRST_QP_LIMIT:
+            break  # a first QP only osqp takes: the deepest collisions
         iterations += 1
         if backend in DENSE_SOLVERS:
             P = np.zeros((problem.N + s, problem.N + s))
